@@ -1,0 +1,96 @@
+"""Find a libLLVM that Dr.Jit's LLVM backend can use, before drjit is imported.
+
+Dr.Jit loads libLLVM at import time. Debian 12's default libLLVM 15 and 16 make it abort
+("LLVM ERROR: Cannot select ... fminimum"); libLLVM 17 or newer works (19 is the one tested).
+:func:`configure_libllvm` sets ``DRJIT_LIBLLVM_PATH`` to the newest working library it finds,
+or raises :class:`~skyref.errors.SkyrefSetupError` saying what to install.
+"""
+
+from __future__ import annotations
+
+import glob
+import os
+import re
+import subprocess
+import sys
+
+from skyref.errors import SkyrefSetupError
+
+#: Major versions of libLLVM that crash Dr.Jit 1.5 on these machines (see DESIGN.md).
+BROKEN_MAJOR_VERSIONS = frozenset({15, 16})
+#: Oldest major version known to work.
+MINIMUM_MAJOR_VERSION = 17
+
+_SEARCH_GLOBS = (
+    "/usr/lib/llvm-*/lib/libLLVM*.so*",
+    "/usr/lib/*-linux-gnu/libLLVM*.so*",
+    "/lib/*-linux-gnu/libLLVM*.so*",
+    "/usr/lib64/libLLVM*.so*",
+    "/usr/local/lib/libLLVM*.so*",
+    "/opt/homebrew/opt/llvm/lib/libLLVM*.dylib",
+    "/usr/local/opt/llvm/lib/libLLVM*.dylib",
+)
+
+INSTALL_HINT = (
+    "Dr.Jit needs libLLVM 17 or newer (Debian's libLLVM 15/16 crash it). "
+    "On Debian 12 run: apt-get install libllvm19 "
+    "(or set DRJIT_LIBLLVM_PATH to a working libLLVM.so)."
+)
+
+
+def major_version(path: str) -> int | None:
+    """Major version encoded in a libLLVM file name (``libLLVM-19.so.1``, ``libLLVM.so.19.1``)."""
+    name = os.path.basename(path)
+    match = re.match(r"libLLVM(?:-(\d+))?\.(?:so|dylib)(?:\.(\d+))?", name)
+    if match and (match.group(1) or match.group(2)):
+        return int(match.group(1) or match.group(2))
+    match = re.search(r"llvm-(\d+)", path)
+    return int(match.group(1)) if match else None
+
+
+def candidate_libraries() -> list[tuple[int, str]]:
+    """All libLLVM files on this machine with their major versions, newest first."""
+    paths = set()
+    for pattern in _SEARCH_GLOBS:
+        paths.update(glob.glob(pattern))
+    try:
+        listing = subprocess.run(["ldconfig", "-p"], capture_output=True, text=True, timeout=10).stdout
+        paths.update(re.findall(r"=>\s*(\S*libLLVM\S*)", listing))
+    except (OSError, subprocess.SubprocessError):
+        pass
+    found = {}
+    for path in paths:
+        version = major_version(path)
+        if version is not None and os.path.exists(path):
+            found.setdefault(os.path.realpath(path), (version, path))
+    return sorted(found.values(), reverse=True)
+
+
+def working_library() -> str | None:
+    """Path of the newest libLLVM whose major version is known to work, or None."""
+    for version, path in candidate_libraries():
+        if version >= MINIMUM_MAJOR_VERSION and version not in BROKEN_MAJOR_VERSIONS:
+            return path
+    return None
+
+
+def configure_libllvm() -> str:
+    """Point Dr.Jit at a working libLLVM; return its path.
+
+    A ``DRJIT_LIBLLVM_PATH`` already set by the user is respected. Must run before ``drjit`` is
+    imported; if drjit is already loaded the current setting is returned unchanged.
+    """
+    preset = os.environ.get("DRJIT_LIBLLVM_PATH")
+    if preset:
+        return preset
+    if "drjit" in sys.modules:
+        return ""
+    path = working_library()
+    if path is None:
+        raise SkyrefSetupError(INSTALL_HINT)
+    os.environ["DRJIT_LIBLLVM_PATH"] = path
+    return path
+
+
+if __name__ == "__main__":  # `python -m skyref._llvm`: exit 0 when a working libLLVM is present
+    sys.exit(0 if working_library() else 1)

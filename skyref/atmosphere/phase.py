@@ -1,0 +1,161 @@
+"""Phase functions p(mu), normalised so that the integral over the sphere is 1 (units sr^-1).
+
+mu = cos(theta) is the cosine of the scattering angle between the incident propagation
+direction and the scattered direction (mu = 1: forward). Evaluation takes an array namespace
+``xp`` (see :mod:`skyref.atmosphere.profiles`); ``g`` may be an array of that namespace so that
+gradients with respect to it flow.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from skyref.atmosphere.validation import check_array, check_number
+
+INV_4PI = 1.0 / (4.0 * math.pi)
+
+
+def rayleigh_phase(mu, xp=np):
+    """Rayleigh (unpolarised, scalar): 3/(16 pi) (1 + mu^2)."""
+    return (3.0 / (16.0 * math.pi)) * (1.0 + mu * mu)
+
+
+def cornette_shanks_phase(mu, g, xp=np):
+    """Cornette & Shanks 1992: 3/(8 pi) (1-g^2)/(2+g^2) (1+mu^2)/(1+g^2-2 g mu)^(3/2).
+
+    Its ``g`` is *not* the asymmetry parameter <mu>; see :func:`cornette_shanks_asymmetry`.
+    """
+    g2 = g * g
+    denom = 1.0 + g2 - 2.0 * g * mu
+    return (3.0 / (8.0 * math.pi)) * (1.0 - g2) / (2.0 + g2) * (1.0 + mu * mu) / (denom * xp.sqrt(denom))
+
+
+def henyey_greenstein_phase(mu, g, xp=np):
+    """Henyey & Greenstein 1941: (1-g^2) / (4 pi (1+g^2-2 g mu)^(3/2)); here g = <mu>."""
+    g2 = g * g
+    denom = 1.0 + g2 - 2.0 * g * mu
+    return INV_4PI * (1.0 - g2) / (denom * xp.sqrt(denom))
+
+
+def cornette_shanks_asymmetry(g: float) -> float:
+    """Asymmetry parameter <mu> of the Cornette–Shanks function with parameter g:
+    3 g (4 + g^2) / (5 (2 + g^2))."""
+    return 3.0 * g * (4.0 + g * g) / (5.0 * (2.0 + g * g))
+
+
+class PhaseFunction:
+    kind: str = ""
+
+    def evaluate(self, mu, xp=np):
+        raise NotImplementedError
+
+    def to_dict(self) -> dict:
+        raise NotImplementedError
+
+
+@dataclass(frozen=True)
+class RayleighPhase(PhaseFunction):
+    """The Rayleigh phase function (scalar transport: polarisation is neglected)."""
+
+    kind = "rayleigh"
+
+    def evaluate(self, mu, xp=np):
+        return rayleigh_phase(mu, xp)
+
+    @property
+    def asymmetry(self) -> float:
+        return 0.0
+
+    def to_dict(self):
+        return {"type": self.kind}
+
+
+@dataclass(frozen=True)
+class CornetteShanks(PhaseFunction):
+    """Cornette–Shanks with parameter g in (-1, 1) (not the asymmetry parameter)."""
+
+    g: float = 0.8
+    kind = "cornette_shanks"
+
+    def __post_init__(self):
+        check_number("g", self.g, -1.0, 1.0, lo_open=True, hi_open=True)
+
+    def evaluate(self, mu, xp=np):
+        return cornette_shanks_phase(mu, self.g, xp)
+
+    @property
+    def asymmetry(self) -> float:
+        return cornette_shanks_asymmetry(self.g)
+
+    def to_dict(self):
+        return {"type": self.kind, "g": self.g}
+
+
+@dataclass(frozen=True)
+class HenyeyGreenstein(PhaseFunction):
+    """Henyey–Greenstein with asymmetry parameter g in (-1, 1)."""
+
+    g: float = 0.8
+    kind = "henyey_greenstein"
+
+    def __post_init__(self):
+        check_number("g", self.g, -1.0, 1.0, lo_open=True, hi_open=True)
+
+    def evaluate(self, mu, xp=np):
+        return henyey_greenstein_phase(mu, self.g, xp)
+
+    @property
+    def asymmetry(self) -> float:
+        return self.g
+
+    def to_dict(self):
+        return {"type": self.kind, "g": self.g}
+
+
+@dataclass(frozen=True)
+class TabulatedPhase(PhaseFunction):
+    """p(mu) given at increasing mu in [-1, 1], interpolated linearly in mu and renormalised so
+    that 2 pi * integral p dmu = 1 (e.g. a Mie computation with miepython)."""
+
+    cosines: tuple
+    values: tuple
+    kind = "tabulated"
+
+    def __post_init__(self):
+        mu = check_array("cosines", self.cosines, -1.0, 1.0, min_length=2, increasing=True)
+        p = check_array("values", self.values, 0.0, math.inf, min_length=2)
+        if mu[0] != -1.0 or mu[-1] != 1.0 or p.size != mu.size:
+            raise ValueError("cosines must run from -1 to 1 and pair up with values")
+        norm = 2.0 * math.pi * float(np.sum(0.5 * (p[1:] + p[:-1]) * np.diff(mu)))
+        if norm <= 0.0:
+            raise ValueError("values: the phase function integrates to zero")
+        object.__setattr__(self, "cosines", tuple(float(x) for x in mu))
+        object.__setattr__(self, "values", tuple(float(x) / norm for x in p))
+
+    def evaluate(self, mu, xp=np):
+        return np.interp(mu, self.cosines, self.values)
+
+    @property
+    def asymmetry(self) -> float:
+        mu = np.asarray(self.cosines)
+        p = np.asarray(self.values) * mu
+        return 2.0 * math.pi * float(np.sum(0.5 * (p[1:] + p[:-1]) * np.diff(mu)))
+
+    def to_dict(self):
+        return {"type": self.kind, "cosines": list(self.cosines), "values": list(self.values)}
+
+
+PHASE_TYPES = {cls.kind: cls for cls in (RayleighPhase, CornetteShanks, HenyeyGreenstein, TabulatedPhase)}
+
+
+def phase_from_dict(data: dict) -> PhaseFunction:
+    from skyref.atmosphere.validation import check_choice
+
+    fields = dict(data)
+    kind = check_choice("phase.type", fields.pop("type", None), tuple(PHASE_TYPES))
+    if kind == TabulatedPhase.kind:
+        return TabulatedPhase(tuple(fields["cosines"]), tuple(fields["values"]))
+    return PHASE_TYPES[kind](**fields)

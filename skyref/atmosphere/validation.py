@@ -1,0 +1,56 @@
+"""Checks run when a model object is built: each raises :class:`ParameterError` naming the
+parameter, the value given and the valid range."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from skyref.errors import ParameterError
+
+
+def check_number(name: str, value, lo: float = -math.inf, hi: float = math.inf,
+                 lo_open: bool = False, hi_open: bool = False) -> float:
+    """Return ``value`` as a float if it is a finite real number in the interval, else raise."""
+    lo_bracket = "(" if lo_open else "["
+    hi_bracket = ")" if hi_open else "]"
+    valid = f"{lo_bracket}{lo:g}, {hi:g}{hi_bracket}"
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ParameterError(name, value, valid, "not a number")
+    x = float(value)
+    if not math.isfinite(x):
+        raise ParameterError(name, value, valid, "not finite")
+    below = x <= lo if lo_open else x < lo
+    above = x >= hi if hi_open else x > hi
+    if below or above:
+        raise ParameterError(name, value, valid, "out of range")
+    return x
+
+
+def check_array(name: str, values, lo: float = -math.inf, hi: float = math.inf,
+                min_length: int = 1, increasing: bool = False) -> np.ndarray:
+    """Return ``values`` as a 1D float64 array whose entries are finite and within [lo, hi]."""
+    try:
+        arr = np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ParameterError(name, values, f"a list of numbers in [{lo:g}, {hi:g}]", "not numeric")
+    valid = f"{min_length} or more finite numbers in [{lo:g}, {hi:g}]" + (
+        ", strictly increasing" if increasing else "")
+    if arr.ndim != 1 or arr.size < min_length:
+        raise ParameterError(name, values, valid, "wrong shape or length")
+    bad = ~np.isfinite(arr) | (arr < lo) | (arr > hi)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise ParameterError(f"{name}[{i}]", float(arr[i]), valid, "out of range")
+    if increasing and np.any(np.diff(arr) <= 0):
+        raise ParameterError(name, values, valid, "not strictly increasing")
+    return arr
+
+
+def check_choice(name: str, value, choices) -> str:
+    """Return ``value`` if it is one of ``choices``."""
+    if value not in choices:
+        raise ParameterError(name, value, "one of " + ", ".join(repr(c) for c in choices),
+                             "unknown choice")
+    return value

@@ -1,0 +1,103 @@
+"""The ``skyref`` command line.
+
+Every subcommand checks its input first; a bad input ends the program with exit status 2 and
+one line that names the problem (no traceback).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+import numpy as np
+
+from skyref.errors import ParameterError, SkyrefSetupError
+
+
+def _describe_scene(scene) -> str:
+    atm = scene.atmosphere
+    wl = scene.wavelengths_nm
+    probe = np.array([440.0, 550.0, 680.0])
+    lines = [
+        f"scene        {scene.name or '(unnamed)'}",
+        f"atmosphere   {atm.name or '(custom)'}: radii {atm.bottom_radius_m / 1e3:g}–{atm.top_radius_m / 1e3:g} km, "
+        f"constituents {', '.join(c.name for c in atm.constituents) or 'none'}",
+    ]
+    if np.all((probe >= 360) & (probe <= 830)):
+        tau = atm.vertical_optical_depth(probe)
+        lines.append("             vertical optical depth " +
+                     ", ".join(f"{t:.4f} @ {w:g} nm" for t, w in zip(tau, probe)))
+    sun = scene.sun
+    lines += [
+        f"sun          zenith {sun.zenith_deg:.3f} deg, azimuth {sun.azimuth_deg:.3f} deg, "
+        f"radius {sun.angular_radius_deg:.4f} deg" + (f" ({sun.time.isoformat()} at {sun.latitude_deg:g} N, "
+                                                     f"{sun.longitude_deg:g} E)" if sun.time else ""),
+        f"observer     altitude {scene.observer.altitude_m:g} m",
+        f"camera       {scene.camera.type} {scene.camera.width}x{scene.camera.height}, fov {scene.camera.fov_deg:g} deg",
+        f"wavelengths  {len(wl)}: {wl[0]:g}–{wl[-1]:g} nm",
+        f"render       {scene.render.spp} spp in {scene.render.passes} passes, seed {scene.render.seed}",
+    ]
+    return "\n".join(lines)
+
+
+def cmd_validate(args) -> int:
+    from skyref.scene import load_scene
+
+    for path in args.scenes:
+        scene = load_scene(path)
+        print(f"{path}: valid")
+        if not args.quiet:
+            print(_describe_scene(scene))
+    return 0
+
+
+def cmd_info(args) -> int:
+    import skyref
+    from skyref import _llvm
+    from skyref.atmosphere import PRESETS
+
+    print(f"skyref       {skyref.__version__}")
+    print(f"python       {sys.version.split()[0]}")
+    libllvm = _llvm.working_library()
+    print(f"libLLVM      {libllvm or 'none that works: ' + _llvm.INSTALL_HINT}")
+    if libllvm:
+        _llvm.configure_libllvm()
+        import drjit
+        import mitsuba
+
+        print(f"mitsuba      {mitsuba.__version__}, drjit {drjit.__version__}")
+        print(f"variants     {', '.join(v for v in mitsuba.variants() if 'ad_' in v and 'polarized' not in v)}")
+        print(f"cuda         {'available' if drjit.has_backend(drjit.JitBackend.CUDA) else 'not available'}")
+    print(f"presets      {', '.join(PRESETS)}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="skyref", description="Reference skies: a spectral path tracer "
+                                     "for planetary atmospheres and the tools that use it as ground truth.")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    p = sub.add_parser("validate", help="check scene files and print what they describe")
+    p.add_argument("scenes", nargs="+", metavar="SCENE", help="scene TOML file(s)")
+    p.add_argument("-q", "--quiet", action="store_true", help="print only whether each scene is valid")
+    p.set_defaults(run=cmd_validate)
+
+    p = sub.add_parser("info", help="versions, libLLVM, Mitsuba variants, presets")
+    p.set_defaults(run=cmd_info)
+    return parser
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.run(args)
+    except (ParameterError, SkyrefSetupError, ValueError, OSError) as exc:
+        print(f"skyref {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"skyref {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,23 @@
+"""Errors that skyref raises for bad input.
+
+Every invalid value is reported *before* any work starts, with the parameter's name, the
+value that was given and the range that would have been accepted.
+"""
+
+
+class ParameterError(ValueError):
+    """A parameter is out of its valid range (or of the wrong kind).
+
+    The message always reads ``<name> = <value>: <what is wrong> (valid: <range>)``.
+    """
+
+    def __init__(self, name: str, value, valid: str, problem: str = "invalid value"):
+        self.name = name
+        self.value = value
+        self.valid = valid
+        super().__init__(f"{name} = {value!r}: {problem} (valid: {valid})")
+
+
+class SkyrefSetupError(RuntimeError):
+    """The machine lacks something skyref needs (e.g. a working libLLVM); the message says
+    what to install."""

@@ -1,0 +1,1 @@
+"""Reading and writing skies: EXR (spectral layout + RGB preview), PNG previews, datasets."""

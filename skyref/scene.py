@@ -1,0 +1,310 @@
+"""A sky scene: atmosphere + sun + observer + camera + spectral sampling + render settings.
+
+Frame convention (observer-centred, east-north-up): x east, y north, z up (local zenith).
+Zenith angles are measured from z; azimuths clockwise from north towards east, so a direction
+of zenith theta and azimuth phi is (sin theta sin phi, sin theta cos phi, cos theta). The sun
+direction points *towards* the sun.
+
+Scenes are stored as TOML (``scenes/*.toml``); :func:`load_scene` and :func:`save_scene`
+round-trip.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import datetime as _dt
+import math
+import tomllib
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from skyref.atmosphere import Atmosphere, from_turbidity, preset, wavelength_grid
+from skyref.atmosphere.validation import check_choice, check_number
+from skyref.errors import ParameterError
+
+#: Bruneton 2017's solar angular radius, 0.00935 / 2 rad, in degrees.
+SUN_ANGULAR_RADIUS_DEG = math.degrees(0.00935 / 2.0)
+
+
+def direction_from_angles(zenith_deg, azimuth_deg) -> np.ndarray:
+    """Unit vector(s) in the east-north-up frame for zenith/azimuth angles in degrees."""
+    theta = np.radians(zenith_deg)
+    phi = np.radians(azimuth_deg)
+    return np.stack([np.sin(theta) * np.sin(phi), np.sin(theta) * np.cos(phi), np.cos(theta)], axis=-1)
+
+
+def _fields_from(cls, data: dict, section: str) -> dict:
+    allowed = [f.name for f in dataclasses.fields(cls) if f.init]
+    for key in data:
+        if key not in allowed:
+            raise ParameterError(f"{section}.{key}", data[key], "one of " + ", ".join(allowed),
+                                 "unknown parameter")
+    return dict(data)
+
+
+@dataclass(frozen=True)
+class Sun:
+    """The sun as seen from the observer.
+
+    Either ``zenith_deg``/``azimuth_deg`` directly, or through :meth:`at` (date, time and place,
+    via pvlib's solar position algorithm; the geometric zenith is used since skyref does not
+    model refraction). ``angular_radius_deg`` sizes the visible disk; ``limb_darkening`` turns
+    on the solar limb darkening of the disk's radiance.
+    """
+
+    zenith_deg: float = 30.0
+    azimuth_deg: float = 180.0
+    angular_radius_deg: float = SUN_ANGULAR_RADIUS_DEG
+    limb_darkening: bool = False
+    time: _dt.datetime | None = None
+    latitude_deg: float | None = None
+    longitude_deg: float | None = None
+
+    def __post_init__(self):
+        check_number("sun.zenith_deg", self.zenith_deg, 0.0, 180.0)
+        check_number("sun.azimuth_deg", self.azimuth_deg, -360.0, 720.0)
+        check_number("sun.angular_radius_deg", self.angular_radius_deg, 0.0, 10.0, lo_open=True)
+        if not isinstance(self.limb_darkening, bool):
+            raise ParameterError("sun.limb_darkening", self.limb_darkening, "true or false", "not a boolean")
+
+    @classmethod
+    def at(cls, time, latitude_deg: float, longitude_deg: float, altitude_m: float = 0.0, **kwargs) -> "Sun":
+        """The sun's position for a time (timezone-aware datetime or ISO 8601 string with an
+        offset; naive times are taken as UTC) at a place (degrees north, degrees east)."""
+        import pandas as pd
+        import pvlib
+
+        check_number("sun.latitude_deg", latitude_deg, -90.0, 90.0)
+        check_number("sun.longitude_deg", longitude_deg, -180.0, 360.0)
+        if isinstance(time, str):
+            try:
+                time = _dt.datetime.fromisoformat(time)
+            except ValueError:
+                raise ParameterError("sun.time", time, "ISO 8601, e.g. 2026-06-21T12:00:00+02:00",
+                                     "unreadable time") from None
+        if not isinstance(time, _dt.datetime):
+            raise ParameterError("sun.time", time, "a date and time", "not a datetime")
+        if time.tzinfo is None:
+            time = time.replace(tzinfo=_dt.timezone.utc)
+        position = pvlib.solarposition.get_solarposition(
+            pd.DatetimeIndex([time]), latitude_deg, longitude_deg, altitude=altitude_m)
+        return cls(zenith_deg=float(position["zenith"].iloc[0]),
+                   azimuth_deg=float(position["azimuth"].iloc[0]), time=time,
+                   latitude_deg=latitude_deg, longitude_deg=longitude_deg, **kwargs)
+
+    @property
+    def direction(self) -> np.ndarray:
+        """Unit vector towards the sun, east-north-up."""
+        return direction_from_angles(self.zenith_deg, self.azimuth_deg)
+
+    def to_dict(self) -> dict:
+        data = {"angular_radius_deg": self.angular_radius_deg, "limb_darkening": self.limb_darkening}
+        if self.time is not None:
+            data.update(time=self.time, latitude_deg=self.latitude_deg, longitude_deg=self.longitude_deg)
+        else:
+            data.update(zenith_deg=self.zenith_deg, azimuth_deg=self.azimuth_deg)
+        return data
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "Sun":
+        fields = _fields_from(cls, data, "sun")
+        if "time" in fields:
+            for key in ("zenith_deg", "azimuth_deg"):
+                if key in fields:
+                    raise ParameterError(f"sun.{key}", fields[key], "omitted when sun.time is given",
+                                         "conflicting sun position")
+            for key in ("latitude_deg", "longitude_deg"):
+                if key not in fields:
+                    raise ParameterError(f"sun.{key}", None, "degrees; required with sun.time", "missing")
+            return cls.at(fields.pop("time"), fields.pop("latitude_deg"), fields.pop("longitude_deg"), **fields)
+        return cls(**fields)
+
+
+@dataclass(frozen=True)
+class Observer:
+    """Where the camera is: ``altitude_m`` above the ground (the atmosphere is horizontally
+    uniform, so altitude is the whole position), 0 m up to 10,000 km (space)."""
+
+    altitude_m: float = 0.0
+
+    def __post_init__(self):
+        check_number("observer.altitude_m", self.altitude_m, 0.0, 1.0e7)
+
+    def to_dict(self) -> dict:
+        return {"altitude_m": self.altitude_m}
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "Observer":
+        return cls(**_fields_from(cls, data, "observer"))
+
+
+CAMERA_TYPES = ("equirectangular", "fisheye", "perspective")
+
+
+@dataclass(frozen=True)
+class Camera:
+    """The image: ``equirectangular`` (rows: zenith 0 to 180 deg, columns: azimuth 0 to 360 deg
+    clockwise from north), ``fisheye`` (equidistant, ``fov_deg`` across, centred on the view
+    direction: 180 deg looking up is the upper hemisphere) or ``perspective`` (``fov_deg``
+    horizontally). The view direction is ``view_zenith_deg``/``view_azimuth_deg``."""
+
+    type: str = "equirectangular"
+    width: int = 256
+    height: int = 128
+    fov_deg: float = 180.0
+    view_zenith_deg: float = 0.0
+    view_azimuth_deg: float = 0.0
+
+    def __post_init__(self):
+        check_choice("camera.type", self.type, CAMERA_TYPES)
+        for name in ("width", "height"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 16384:
+                raise ParameterError(f"camera.{name}", value, "an integer in [1, 16384]", "invalid size")
+        fov_max = 179.0 if self.type == "perspective" else 360.0
+        check_number("camera.fov_deg", self.fov_deg, 0.0, fov_max, lo_open=True)
+        check_number("camera.view_zenith_deg", self.view_zenith_deg, 0.0, 180.0)
+        check_number("camera.view_azimuth_deg", self.view_azimuth_deg, -360.0, 720.0)
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "Camera":
+        return cls(**_fields_from(cls, data, "camera"))
+
+
+@dataclass(frozen=True)
+class RenderSettings:
+    """Samples per pixel, random seed, number of independent passes (their spread gives each
+    pixel's standard error) and the longest path (scattering events + 1)."""
+
+    spp: int = 64
+    seed: int = 0
+    passes: int = 4
+    max_depth: int = 64
+
+    def __post_init__(self):
+        for name, lo, hi in (("spp", 1, 1 << 24), ("seed", 0, (1 << 31) - 1), ("passes", 2, 1024),
+                             ("max_depth", 1, 100_000)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
+                raise ParameterError(f"render.{name}", value, f"an integer in [{lo}, {hi}]", "invalid")
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "RenderSettings":
+        return cls(**_fields_from(cls, data, "render"))
+
+
+@dataclass(frozen=True)
+class Scene:
+    atmosphere: Atmosphere = field(default_factory=lambda: preset("bruneton2017"))
+    sun: Sun = Sun()
+    observer: Observer = Observer()
+    camera: Camera = Camera()
+    wavelengths: object = "rgb"
+    render: RenderSettings = RenderSettings()
+    name: str = ""
+
+    def __post_init__(self):
+        spec = self.wavelengths
+        if isinstance(spec, (list, tuple, np.ndarray)):
+            spec = tuple(float(x) for x in spec)
+        object.__setattr__(self, "wavelengths", spec)
+        self.atmosphere.check_wavelengths(self.wavelengths_nm)
+
+    @property
+    def wavelengths_nm(self) -> np.ndarray:
+        return wavelength_grid(list(self.wavelengths) if isinstance(self.wavelengths, tuple) else self.wavelengths)
+
+    def replace(self, **changes) -> "Scene":
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict:
+        wavelengths = list(self.wavelengths) if isinstance(self.wavelengths, tuple) else self.wavelengths
+        data = {"atmosphere": self.atmosphere.to_dict(), "sun": self.sun.to_dict(),
+                "observer": self.observer.to_dict(), "camera": self.camera.to_dict(),
+                "spectral": {"wavelengths": wavelengths}, "render": self.render.to_dict()}
+        if self.name:
+            data["name"] = self.name
+        return data
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "Scene":
+        known = ("name", "atmosphere", "sun", "observer", "camera", "spectral", "render")
+        for key in data:
+            if key not in known:
+                raise ParameterError(key, data[key], "top-level tables " + ", ".join(known), "unknown entry")
+        spectral = dict(data.get("spectral", {}))
+        wavelengths = spectral.pop("wavelengths", "rgb")
+        if spectral:
+            key = next(iter(spectral))
+            raise ParameterError(f"spectral.{key}", spectral[key], "only spectral.wavelengths", "unknown parameter")
+        return cls(atmosphere=atmosphere_from_scene_dict(data.get("atmosphere", {"preset": "bruneton2017"})),
+                   sun=Sun.from_dict(data.get("sun", {})),
+                   observer=Observer.from_dict(data.get("observer", {})),
+                   camera=Camera.from_dict(data.get("camera", {})),
+                   wavelengths=wavelengths,
+                   render=RenderSettings.from_dict(data.get("render", {})),
+                   name=data.get("name", ""))
+
+
+def _merge(base: dict, overrides: dict) -> dict:
+    merged = copy.deepcopy(base)
+    for key, value in overrides.items():
+        if isinstance(value, dict) and isinstance(merged.get(key), dict):
+            merged[key] = _merge(merged[key], value)
+        else:
+            merged[key] = value
+    return merged
+
+
+def atmosphere_from_scene_dict(data: dict) -> Atmosphere:
+    """Build an atmosphere from a scene's ``[atmosphere]`` table.
+
+    ``preset = NAME`` starts from a preset; every other key overrides it (tables merge key by
+    key: ``[atmosphere.constituents.aerosol] angstrom_beta = 0.1``); a constituent set to
+    ``false`` is removed; ``turbidity = T`` finally re-derives the aerosol with
+    :func:`~skyref.atmosphere.from_turbidity`. Without a preset the table must describe the whole
+    atmosphere (as :func:`save_scene` writes it).
+    """
+    fields = dict(data)
+    name = fields.pop("preset", None)
+    turbidity = fields.pop("turbidity", None)
+    merged = _merge(preset(name).to_dict(), fields) if name is not None else fields
+    constituents = merged.get("constituents", {})
+    merged["constituents"] = {k: v for k, v in constituents.items() if v is not False}
+    atmosphere = Atmosphere.from_dict(merged)
+    if turbidity is not None:
+        atmosphere = from_turbidity(turbidity, base=atmosphere)
+    return atmosphere
+
+
+def load_scene(path) -> Scene:
+    """Read a scene TOML file; errors name the file and the offending entry."""
+    try:
+        with open(path, "rb") as f:
+            data = tomllib.load(f)
+    except FileNotFoundError:
+        raise ParameterError("scene", str(path), "an existing TOML file", "file not found") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ParameterError("scene", str(path), "valid TOML", f"TOML syntax error: {exc}") from None
+    scene = Scene.from_dict(data)
+    if not scene.name:
+        scene = scene.replace(name=str(path).rsplit("/", 1)[-1].removesuffix(".toml"))
+    return scene
+
+
+def save_scene(scene: Scene, path) -> None:
+    """Write the scene, fully resolved (no preset), atomically."""
+    import tomli_w
+
+    from skyref.io.atomic import atomic_write
+
+    with atomic_write(path, "wb") as f:
+        tomli_w.dump(scene.to_dict(), f)
