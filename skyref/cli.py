@@ -23,8 +23,11 @@ def _describe_scene(scene) -> str:
         f"atmosphere   {atm.name or '(custom)'}: radii {atm.bottom_radius_m / 1e3:g}–{atm.top_radius_m / 1e3:g} km, "
         f"constituents {', '.join(c.name for c in atm.constituents) or 'none'}",
     ]
-    if np.all((probe >= 360) & (probe <= 830)):
+    try:
         tau = atm.vertical_optical_depth(probe)
+    except ParameterError:  # a spectrum of this atmosphere does not cover the probe wavelengths
+        tau = None
+    if tau is not None:
         lines.append("             vertical optical depth " +
                      ", ".join(f"{t:.4f} @ {w:g} nm" for t, w in zip(tau, probe)))
     sun = scene.sun

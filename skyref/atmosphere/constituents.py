@@ -236,6 +236,14 @@ def constituent_from_dict(data: dict) -> Constituent:
     if fields.get("cross_section") == "ozone_233K":
         fields["cross_section"] = ozone_cross_section()
     cls = CONSTITUENT_TYPES[kind]
+    # to_dict() omits the alternative that is not used (TOML has no null), whose default is not
+    # None: a tabulated aerosol has no Angstrom parameters, an absorber given by number density
+    # no column amount. Without this, neither could be read back.
+    if cls is Aerosol and "extinction" in fields:
+        fields.setdefault("angstrom_alpha", None)
+        fields.setdefault("angstrom_beta", None)
+    if cls is Absorber and "number_density_per_m3" in fields:
+        fields.setdefault("column_du", None)
     allowed = {f for f in cls.__dataclass_fields__ if cls.__dataclass_fields__[f].init}
     for key in fields:
         if key not in allowed:

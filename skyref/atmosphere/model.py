@@ -37,6 +37,8 @@ class Atmosphere:
         check_number("bottom_radius_m", self.bottom_radius_m, *RADIUS_RANGE_M)
         check_number("top_radius_m", self.top_radius_m, self.bottom_radius_m, RADIUS_RANGE_M[1],
                      lo_open=True)
+        if not isinstance(self.ground_albedo, (Spectrum, dict)):
+            check_number("ground_albedo", self.ground_albedo, 0.0, 1.0)
         albedo = as_spectrum(self.ground_albedo)
         object.__setattr__(self, "ground_albedo", albedo)
         probe = albedo(np.linspace(*albedo.valid_range_nm, 64))
@@ -44,10 +46,11 @@ class Atmosphere:
             raise ParameterError("ground_albedo", albedo.to_dict(), "[0, 1] at every wavelength",
                                  "out of range")
         constituents = tuple(self.constituents)
-        names = [c.name for c in constituents]
         for c in constituents:
             if not isinstance(c, Constituent):
                 raise ParameterError("constituents", c, "Rayleigh, Aerosol or Absorber objects", "wrong type")
+        names = [c.name for c in constituents]
+        for c in constituents:
             if names.count(c.name) > 1:
                 raise ParameterError("constituents", names, "unique names", f"{c.name!r} appears twice")
         object.__setattr__(self, "constituents", constituents)

@@ -152,10 +152,11 @@ PHASE_TYPES = {cls.kind: cls for cls in (RayleighPhase, CornetteShanks, HenyeyGr
 
 
 def phase_from_dict(data: dict) -> PhaseFunction:
-    from skyref.atmosphere.validation import check_choice
+    from skyref.atmosphere.validation import check_choice, check_fields
 
     fields = dict(data)
     kind = check_choice("phase.type", fields.pop("type", None), tuple(PHASE_TYPES))
+    check_fields("phase", fields, PHASE_TYPES[kind])
     if kind == TabulatedPhase.kind:
         return TabulatedPhase(tuple(fields["cosines"]), tuple(fields["values"]))
     return PHASE_TYPES[kind](**fields)

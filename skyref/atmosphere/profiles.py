@@ -164,11 +164,12 @@ PROFILE_TYPES = {cls.kind: cls for cls in (ExponentialProfile, PiecewiseLinearPr
 
 def profile_from_dict(data: dict) -> DensityProfile:
     """Inverse of ``DensityProfile.to_dict``."""
-    from skyref.atmosphere.validation import check_choice
+    from skyref.atmosphere.validation import check_choice, check_fields
 
     fields = dict(data)
     kind = check_choice("profile.type", fields.pop("type", None), tuple(PROFILE_TYPES))
     cls = PROFILE_TYPES[kind]
+    check_fields("profile", fields, cls)
     if "altitudes_m" in fields:
         fields["altitudes_m"] = tuple(fields["altitudes_m"])
         fields["densities"] = tuple(fields["densities"])

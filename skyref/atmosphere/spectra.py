@@ -14,7 +14,7 @@ from importlib import resources
 
 import numpy as np
 
-from skyref.atmosphere.validation import check_array, check_number
+from skyref.atmosphere.validation import check_array, check_fields, check_number
 from skyref.errors import ParameterError
 
 #: Molecules per m^2 in one Dobson unit (0.01 mm of pure gas at 273.15 K and 1 atm).
@@ -139,6 +139,8 @@ def as_spectrum(value) -> Spectrum:
     if isinstance(value, dict):
         fields = dict(value)
         kind = fields.pop("type", None)
+        if kind in (PowerLawSpectrum.kind, TabulatedSpectrum.kind):
+            check_fields("spectrum", fields, {s.kind: s for s in (PowerLawSpectrum, TabulatedSpectrum)}[kind])
         if kind == PowerLawSpectrum.kind:
             return PowerLawSpectrum(**fields)
         if kind == TabulatedSpectrum.kind:

@@ -48,6 +48,24 @@ def check_array(name: str, values, lo: float = -math.inf, hi: float = math.inf,
     return arr
 
 
+def check_fields(section: str, fields: dict, cls) -> dict:
+    """Return ``fields`` if they fit the dataclass ``cls``: every key is one of its init fields
+    and every field without a default is present; else raise naming ``section.key``."""
+    import dataclasses
+
+    init = [f for f in dataclasses.fields(cls) if f.init]
+    names = [f.name for f in init]
+    for key in fields:
+        if key not in names:
+            raise ParameterError(f"{section}.{key}", fields[key], "one of " + ", ".join(names),
+                                 "unknown parameter")
+    for f in init:
+        if (f.name not in fields and f.default is dataclasses.MISSING
+                and f.default_factory is dataclasses.MISSING):
+            raise ParameterError(f"{section}.{f.name}", None, "a value", "missing")
+    return fields
+
+
 def check_choice(name: str, value, choices) -> str:
     """Return ``value`` if it is one of ``choices``."""
     if value not in choices:

@@ -1,0 +1,183 @@
+"""Skies as spectral OpenEXR files, in the layout of Fichet, Pacanowski & Wilkie 2021 ("An
+OpenEXR Layout for Spectral Images", JCGT 10(3)), so spectral viewers and libraries that follow
+it (spectral-exr, colour's ``read_spectral_image_Fichet2021``) open them.
+
+Channels (all 32-bit FLOAT, ZIP-compressed, lossless):
+
+- ``S0.<wavelength>nm``: the spectral radiance (unpolarised: Stokes component 0 only), the
+  wavelength in nm written with a comma as decimal separator and 6 decimals, e.g.
+  ``S0.550,000000nm`` (the layout reserves ``.`` for layers);
+- ``R``, ``G``, ``B``: linear sRGB preview (:func:`skyref.color.spectral_to_linear_srgb`, scale:
+  Y in cd m^-2);
+- ``stderr.S0.<wavelength>nm``: the standard error of the radiance;
+- ``<order>.S0.<wavelength>nm`` for each scattering order of :data:`skyref.sky.ORDER_NAMES`
+  the sky has.
+
+Header: ``spectralLayoutVersion = "1.0"`` and ``emissiveUnits = "W.m^-2.sr^-1"`` as the layout
+requires (the only emissive unit it defines; the values are spectral radiance per nm, which
+``skyref.radianceUnits = "W.m^-2.sr^-1.nm^-1"`` states explicitly), ``skyref.scene`` (the scene
+as TOML, when the sky has one) and ``skyref.metadata`` (JSON of ``sky.metadata``).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+import tomllib
+
+import numpy as np
+
+from skyref.errors import ParameterError
+from skyref.io.atomic import atomic_path
+from skyref.sky import ORDER_NAMES, Sky
+
+SPECTRAL_LAYOUT_VERSION = "1.0"
+EMISSIVE_UNITS = "W.m^-2.sr^-1"
+RADIANCE_UNITS = "W.m^-2.sr^-1.nm^-1"
+STDERR_LAYER = "stderr"
+
+#: An emissive channel of the layout: Stokes component, number (comma decimal separator,
+#: optional exponent), optional SI prefix, unit (m or Hz).
+_CHANNEL = re.compile(r"^(?:(?P<layer>[^.]+)\.)?S(?P<stokes>[0-3])\.(?P<number>\d*,?\d*(?:[Ee][+-]?\d+)?)"
+                      r"(?P<prefix>Y|Z|E|P|T|G|M|k|h|da|d|c|m|u|n|p)?(?P<unit>m|Hz)$")
+_PREFIX = {"Y": 1e24, "Z": 1e21, "E": 1e18, "P": 1e15, "T": 1e12, "G": 1e9, "M": 1e6, "k": 1e3,
+           "h": 1e2, "da": 1e1, "": 1.0, "d": 1e-1, "c": 1e-2, "m": 1e-3, "u": 1e-6, "n": 1e-9, "p": 1e-12}
+_SPEED_OF_LIGHT = 299_792_458.0
+
+
+def channel_name(wavelength_nm: float, layer: str = "") -> str:
+    """``[layer.]S0.<wavelength>nm`` with 6 decimals and a decimal comma."""
+    name = "S0." + f"{float(wavelength_nm):.6f}".replace(".", ",") + "nm"
+    return f"{layer}.{name}" if layer else name
+
+
+def _channel_wavelength_nm(match) -> float:
+    value = float(match["number"].replace(",", ".")) * _PREFIX[match["prefix"] or ""]
+    return value * 1e9 if match["unit"] == "m" else _SPEED_OF_LIGHT / value * 1e9
+
+
+def _json_default(value):
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f"sky.metadata: {type(value).__name__} is not JSON-serialisable")
+
+
+def _check_layer(name: str, array, shape) -> np.ndarray:
+    array = np.asarray(array)
+    if array.shape != shape:
+        raise ParameterError(name, f"array of shape {array.shape}", f"shape {shape} (height, width, wavelengths)",
+                             "shape mismatch")
+    return np.ascontiguousarray(array, dtype=np.float32)
+
+
+def write_sky_exr(sky: Sky, path) -> None:
+    """Write ``sky`` to ``path`` (atomically: readers never see a partial file)."""
+    import OpenEXR
+    import tomli_w
+
+    from skyref.color import spectral_to_linear_srgb
+
+    wavelengths = np.asarray(sky.wavelengths_nm, dtype=np.float64).reshape(-1)
+    radiance = np.asarray(sky.radiance)
+    if radiance.ndim != 3 or radiance.shape[2] != wavelengths.size:
+        raise ParameterError("sky.radiance", f"array of shape {radiance.shape}",
+                             f"(height, width, {wavelengths.size}) for {wavelengths.size} wavelengths", "shape mismatch")
+    names = [channel_name(w) for w in wavelengths]
+    if len(set(names)) != len(names):
+        raise ParameterError("sky.wavelengths_nm", wavelengths.tolist(), "values distinct at 1e-6 nm",
+                             "duplicate wavelengths")
+    shape = radiance.shape
+    layers = {"": _check_layer("sky.radiance", radiance, shape),
+              STDERR_LAYER: _check_layer("sky.standard_error", sky.standard_error, shape)}
+    for order, values in sky.orders.items():
+        if order not in ORDER_NAMES:
+            raise ParameterError("sky.orders", order, ", ".join(ORDER_NAMES), "unknown scattering order")
+        layers[order] = _check_layer(f"sky.orders[{order!r}]", values, shape)
+
+    rgb = spectral_to_linear_srgb(layers[""], wavelengths).astype(np.float32)
+    channels = {c: np.ascontiguousarray(rgb[..., i]) for i, c in enumerate("RGB")}
+    for layer, values in layers.items():
+        for k, wavelength in enumerate(wavelengths):
+            channels[channel_name(wavelength, layer)] = np.ascontiguousarray(values[..., k])
+
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage,
+              "spectralLayoutVersion": SPECTRAL_LAYOUT_VERSION, "emissiveUnits": EMISSIVE_UNITS,
+              "skyref.radianceUnits": RADIANCE_UNITS,
+              "skyref.metadata": json.dumps(sky.metadata, default=_json_default, sort_keys=True)}
+    if sky.scene is not None:
+        header["skyref.scene"] = tomli_w.dumps(sky.scene.to_dict())
+    with atomic_path(path) as tmp, OpenEXR.File(header, channels) as exr:
+        exr.write(tmp)
+
+
+def read_sky_exr(path) -> Sky:
+    """Read a sky written by :func:`write_sky_exr` (or any emissive file of the layout).
+
+    Radiance, standard error and orders come back as float32 arrays. Wavelengths are in
+    ascending order, or in the scene's order when the file holds a scene with the same set.
+    ``directions`` come from the scene's camera (:func:`skyref.projection.pixel_directions`),
+    NaN without a scene; ``standard_error`` is NaN when the file has no ``stderr`` layer.
+    Metadata arrays come back as lists (JSON).
+    """
+    import OpenEXR
+
+    from skyref.projection import pixel_directions
+    from skyref.scene import Scene
+
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise ParameterError("path", path, "an existing OpenEXR file", "file not found")
+    try:
+        with OpenEXR.File(path, separate_channels=True) as exr:
+            header = exr.header()
+            pixels = {name: channel.pixels for name, channel in exr.channels().items()}
+    except (RuntimeError, OSError, ValueError) as exc:
+        raise ParameterError("path", path, "a readable OpenEXR file", f"unreadable: {exc}") from None
+
+    layers: dict[str, dict[float, str]] = {}
+    for name in pixels:
+        match = _CHANNEL.match(name)
+        if match and match["stokes"] == "0":
+            layers.setdefault(match["layer"] or "", {})[_channel_wavelength_nm(match)] = name
+    if "" not in layers:
+        raise ParameterError("path", path, "an emissive spectral OpenEXR (channels S0.<wavelength>nm)",
+                             "no spectral channels")
+
+    scene = None
+    if "skyref.scene" in header:
+        try:
+            scene = Scene.from_dict(tomllib.loads(str(header["skyref.scene"])))
+        except tomllib.TOMLDecodeError as exc:
+            raise ParameterError("path", path, "a valid skyref.scene TOML attribute", f"TOML error: {exc}") from None
+    wavelengths = np.array(sorted(layers[""]))
+    if scene is not None:
+        scene_wavelengths = np.round(scene.wavelengths_nm, 6)
+        if sorted(scene_wavelengths.tolist()) == sorted(np.round(wavelengths, 6).tolist()):
+            lookup = {round(w, 6): w for w in wavelengths}
+            wavelengths = np.array([lookup[w] for w in scene_wavelengths.tolist()])
+
+    def stack(layer):
+        names = layers[layer]
+        if set(names) != set(wavelengths):
+            raise ParameterError("path", path, "the same wavelengths in every layer",
+                                 f"layer {layer!r} has {sorted(names)}")
+        return np.stack([pixels[names[w]].astype(np.float32) for w in wavelengths], axis=-1)
+
+    radiance = stack("")
+    standard_error = stack(STDERR_LAYER) if STDERR_LAYER in layers else np.full_like(radiance, np.nan)
+    orders = {order: stack(order) for order in ORDER_NAMES if order in layers}
+    height, width = radiance.shape[:2]
+    if scene is not None:
+        if (scene.camera.height, scene.camera.width) != (height, width):
+            raise ParameterError("path", path, f"a scene camera of {width}x{height} pixels",
+                                 f"scene camera is {scene.camera.width}x{scene.camera.height}")
+        directions = pixel_directions(scene.camera)
+    else:
+        directions = np.full((height, width, 3), math.nan)
+    metadata = json.loads(str(header.get("skyref.metadata", "{}")))
+    return Sky(radiance=radiance, standard_error=standard_error, wavelengths_nm=wavelengths,
+               directions=directions, orders=orders, scene=scene, metadata=metadata)

@@ -1,0 +1,45 @@
+"""Mitsuba plugins of skyref, and the one place that loads Mitsuba.
+
+:func:`load_mitsuba` points Dr.Jit at a working libLLVM, selects a variant (``cuda_ad_rgb``
+when a GPU is present, else ``llvm_ad_rgb``) and registers skyref's plugins:
+
+- ``atmosphere`` medium (:mod:`skyref.plugins.medium`), usable by stock ``volpath``;
+- ``atmosphere_phase`` phase function (:mod:`skyref.plugins.phase`);
+- ``equirectangular`` and ``fisheye`` sensors (:mod:`skyref.plugins.sensors`);
+- ``atmosphere`` integrator (:mod:`skyref.plugins.integrator`), the fast ground truth.
+"""
+
+from __future__ import annotations
+
+_registered_for = set()
+
+
+def default_variant() -> str:
+    import drjit as dr
+
+    return "cuda_ad_rgb" if dr.has_backend(dr.JitBackend.CUDA) else "llvm_ad_rgb"
+
+
+def load_mitsuba(variant: str | None = None):
+    """Import Mitsuba with ``variant`` (default: :func:`default_variant`), register skyref's
+    plugins for it and return the ``mitsuba`` module."""
+    from skyref._llvm import configure_libllvm
+
+    configure_libllvm()
+    import mitsuba as mi
+
+    from skyref.atmosphere.validation import check_choice
+
+    supported = [v for v in mi.variants() if v.split("_", 2)[-1] in ("rgb", "spectral") and "_ad_" in v]
+    variant = check_choice("variant", variant or default_variant(), supported)
+    if mi.variant() != variant:
+        mi.set_variant(variant)
+    if variant not in _registered_for:
+        from skyref.plugins import integrator, medium, phase, sensors
+
+        sensors.register_sensors()
+        phase.register()
+        medium.register()
+        integrator.register()
+        _registered_for.add(variant)
+    return mi

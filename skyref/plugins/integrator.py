@@ -1,0 +1,371 @@
+"""The ``atmosphere`` integrator: skyref's fast, unbiased ground truth.
+
+A spectral path tracer for the atmosphere alone, written directly in Dr.Jit (no Mitsuba shapes
+for the planet: the ground and the top of the atmosphere are analytic spheres, or planes, in an
+observer-centred frame, see :mod:`skyref.plugins.geometry`).
+
+Estimator, per camera sample:
+
+* **Wavelengths.** A path carries K channels (indices into the wavelength grid of N values):
+  channel k takes index (j + k floor(N/K)) mod N with j uniform, so every wavelength is carried
+  with probability K/N and the image estimate divides by that.
+* **Free flights: spectral tracking** (Kutz et al. 2017) against a *grey* majorant (the largest
+  extinction over the channels; per-channel majorants bias and inflate variance, DESIGN.md).
+  The majorant is the extinction at the lowest point of the remaining segment, regenerated after
+  every tentative collision, so it follows the density as the ray climbs. At a tentative
+  collision the event is real scattering with probability P_s = <w sigma_s> / (<w sigma_s> +
+  <w (mu - sigma_t)>) (averages over channels of the path throughput w) and null otherwise; the
+  throughput is multiplied by sigma_s / (mu P_s) or (mu - sigma_t) / (mu (1 - P_s)), which
+  keeps every channel unbiased. Absorption (ozone, aerosol) acts through the null weight.
+* **Next-event estimation to the sun** at every scattering vertex and ground vertex: a
+  direction uniformly inside the solar disk, its transmittance by **ratio tracking** (unbiased),
+  zero if the ground blocks it. The sun is never hit by chance after a scattering event (space is
+  black), so nothing is counted twice; a camera ray that leaves the atmosphere without scattering
+  sees the solar disk (``sun_direct``).
+* **Phase sampling**: the local mixture of Rayleigh and aerosol phase functions, sampled by a
+  one-sample mixture (Rayleigh exactly, Cornette–Shanks via Henyey–Greenstein), weight
+  p / pdf.
+* **Ground**: Lambertian, cosine-weighted sampling (weight = albedo).
+* **Russian roulette** from the third vertex on, on the largest channel throughput.
+
+Each contribution is filed under its scattering order: ``sun_direct`` (0), ``single`` (1),
+``double`` (2), ``higher`` (3+); the radiance is their sum.
+
+Differentiable parameters (:class:`skyref.plugins.optics.AtmosphereOptics`) enter only the
+throughput weights: sampling decisions (majorants, event and component probabilities, sampling
+densities) are detached, so forward-mode derivatives of the estimate are unbiased estimates of
+the derivatives of the radiance.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from skyref.atmosphere import Atmosphere, preset, solar_irradiance
+from skyref.plugins.geometry import PlaneParallelSlab, SphericalShell
+from skyref.plugins.optics import AtmosphereOptics, direction_with_cosine
+from skyref.sky import ORDER_NAMES
+
+#: Limb-darkening coefficient u of the linear law I(mu)/I(1) = 1 - u (1 - mu), grey (a visible
+#: band average; Neckel & Labs 1994 give 0.5–0.7 across 450–700 nm).
+LIMB_DARKENING_U = 0.6
+
+#: Majorants are inflated by this factor so that float32 rounding of an altitude can never push
+#: the local extinction above them (any upper bound keeps delta tracking unbiased).
+MAJORANT_SAFETY = 1.001
+
+#: Russian roulette starts at this scattering order.
+ROULETTE_DEPTH = 3
+
+
+class SunLight:
+    """The sun as a disk of angular radius ``angular_radius_rad`` around ``direction`` (unit,
+    towards the sun) delivering ``irradiance`` (W m^-2 nm^-1 per grid wavelength, perpendicular to
+    the beam at the top of the atmosphere)."""
+
+    def __init__(self, direction, angular_radius_rad, irradiance, limb_darkening=False):
+        self.direction = mi.Vector3f(*[float(x) for x in direction])
+        self.cos_radius = float(math.cos(angular_radius_rad))
+        self.solid_angle = 2.0 * math.pi * (1.0 - self.cos_radius)
+        self.irradiance = mi.Float(np.asarray(irradiance, np.float32))
+        self.limb_darkening = bool(limb_darkening)
+        self.frame = mi.Frame3f(self.direction)
+
+    def radiance_factor(self, cos_angle):
+        """Radiance of the disk at angle acos(cos_angle) from its centre, divided by its mean
+        (1 everywhere without limb darkening); 0 outside the disk."""
+        return dr.select(cos_angle >= self.cos_radius, self._limb_darkening(cos_angle), 0.0)
+
+    def _limb_darkening(self, cos_angle):
+        """Linear limb-darkening law in mu = cos of the emission angle on the solar surface,
+        normalised by its disk mean 1 - u/3; 1 when limb darkening is off."""
+        if not self.limb_darkening:
+            return mi.Float(1.0)
+        sin_ratio2 = dr.clip((1.0 - cos_angle * cos_angle) / (1.0 - self.cos_radius ** 2), 0.0, 1.0)
+        mu = dr.safe_sqrt(1.0 - sin_ratio2)
+        return (1.0 - LIMB_DARKENING_U * (1.0 - mu)) / (1.0 - LIMB_DARKENING_U / 3.0)
+
+    def channel_irradiance(self, indices):
+        return mi.ArrayXf([dr.gather(mi.Float, self.irradiance, i) for i in indices])
+
+    def sample_direction(self, u):
+        """A direction uniformly distributed (in solid angle) inside the disk; returns it with
+        the factor by which E_sun must be multiplied (the limb-darkening ratio)."""
+        local = mi.warp.square_to_uniform_cone(u, self.cos_radius)
+        # No inside test here: in float32, cos(radius) ~ 1 - 1e-5 is resolved to ~1/180 of the
+        # cone, and a sampled direction must never be rejected by rounding.
+        return self.frame.to_world(local), self._limb_darkening(local.z)
+
+
+class AtmosphereIntegrator(mi.SamplingIntegrator):
+    """Mitsuba plugin ``atmosphere``. Properties (all optional):
+
+    ``atmosphere`` (string: a preset name or the JSON of ``Atmosphere.to_dict()``;
+    default ``bruneton2017``), ``wavelengths`` (string: comma-separated nm, or ``rgb``),
+    ``sun_zenith``/``sun_azimuth`` (degrees), ``sun_angular_radius`` (degrees),
+    ``limb_darkening`` (bool), ``observer_altitude`` (m), ``geometry`` (``spherical`` or
+    ``plane_parallel``), ``max_depth`` (int), ``wavelengths_per_path`` (int, default min(N, 4)).
+
+    From Python, :meth:`configure` sets the same things from skyref objects.
+    """
+
+    def __init__(self, props=mi.Properties()):
+        super().__init__(props)
+        text = props.get("atmosphere", "bruneton2017")
+        atmosphere = (Atmosphere.from_dict(json.loads(text)) if text.lstrip().startswith("{")
+                      else preset(text))
+        wavelengths = props.get("wavelengths", "rgb")
+        from skyref.atmosphere import wavelength_grid
+
+        grid = wavelength_grid("rgb" if wavelengths == "rgb" else [float(x) for x in wavelengths.split(",")])
+        self.configure(atmosphere, grid, sun_zenith_deg=props.get("sun_zenith", 30.0),
+                       sun_azimuth_deg=props.get("sun_azimuth", 180.0),
+                       sun_angular_radius_deg=props.get("sun_angular_radius", math.degrees(0.00935 / 2)),
+                       limb_darkening=props.get("limb_darkening", False),
+                       observer_altitude_m=props.get("observer_altitude", 0.0),
+                       geometry=props.get("geometry", "spherical"),
+                       max_depth=props.get("max_depth", 64),
+                       wavelengths_per_path=props.get("wavelengths_per_path", 0))
+
+    def configure(self, atmosphere, wavelengths_nm, sun_zenith_deg, sun_azimuth_deg,
+                  sun_angular_radius_deg, limb_darkening=False, observer_altitude_m=0.0,
+                  geometry="spherical", max_depth=64, wavelengths_per_path=0):
+        """Set the atmosphere, wavelength grid (nm), sun, observer and estimator settings."""
+        from skyref.atmosphere.validation import check_choice, check_number
+        from skyref.scene import direction_from_angles
+
+        check_choice("geometry", geometry, ("spherical", "plane_parallel"))
+        self.optics = AtmosphereOptics(atmosphere, wavelengths_nm)
+        self.wavelengths_nm = self.optics.wavelengths_nm
+        n = len(self.wavelengths_nm)
+        k = int(wavelengths_per_path) or min(n, 4)
+        if not 1 <= k <= n:
+            from skyref.errors import ParameterError
+
+            raise ParameterError("wavelengths_per_path", wavelengths_per_path, f"an integer in [1, {n}]")
+        self.channels = k
+        self.max_depth = int(check_number("max_depth", max_depth, 1, 100_000))
+        h0 = check_number("observer_altitude_m", observer_altitude_m, 0.0, 1.0e8)
+        if geometry == "spherical":
+            self.geometry = SphericalShell(atmosphere.bottom_radius_m, atmosphere.top_radius_m, h0)
+        else:
+            self.geometry = PlaneParallelSlab(atmosphere.thickness_m, h0)
+        self.sun = SunLight(direction_from_angles(sun_zenith_deg, sun_azimuth_deg),
+                            math.radians(sun_angular_radius_deg), solar_irradiance(self.wavelengths_nm),
+                            limb_darkening)
+        self.geometry_name = geometry
+
+    # --- Mitsuba plumbing ---------------------------------------------------------------------
+
+    def traverse(self, callback):
+        for name, value in self.optics.parameters().items():
+            callback.put(name, value, mi.ParamFlags.Differentiable)
+
+    def parameters_changed(self, keys=[]):
+        pass
+
+    def sample(self, scene, sampler, ray, medium=None, active=True):
+        """Mitsuba's per-ray entry point, so that ``mi.render`` works in RGB variants with the
+        "rgb" grid (channels 680/550/440 nm become R, G, B). skyref itself renders any
+        wavelength grid through :meth:`render_orders`."""
+        if dr.size_v(mi.Spectrum) != 3 or len(self.wavelengths_nm) != 3:
+            raise RuntimeError("the atmosphere integrator renders through mi.render only in RGB "
+                               "variants with wavelengths='rgb'; use skyref.render_sky otherwise")
+        indices = [mi.UInt32(i) for i in range(3)]
+        orders = self.trace(sampler, ray.o, ray.d, indices, mi.Bool(active))
+        total = orders[0] + orders[1] + orders[2] + orders[3]
+        return mi.Spectrum(total[0], total[1], total[2]), mi.Bool(active), []
+
+    # --- rendering ----------------------------------------------------------------------------
+
+    def render_orders(self, sensor, seed: int, spp: int) -> mi.TensorXf:
+        """Render one pass through a Mitsuba sensor: a tensor (H, W, 4, N) of radiance per pixel,
+        scattering order (``ORDER_NAMES``) and grid wavelength, W m^-2 sr^-1 nm^-1."""
+        width, height = (int(x) for x in sensor.film().crop_size())
+        sampler, pixel = self._wavefront(seed, width * height, spp)
+        position = mi.Vector2f(mi.Float(pixel % width), mi.Float(pixel // width)) + sampler.next_2d()
+        film_uv = position * mi.Vector2f(1.0 / width, 1.0 / height)
+        ray, weight = sensor.sample_ray(time=0.0, sample1=sampler.next_1d(), sample2=film_uv,
+                                        sample3=sampler.next_2d(), active=True)
+        valid = dr.max(mi.Spectrum(weight), axis=0) > 0.0
+        image = self._estimate(sampler, pixel, width * height, spp, ray.o, ray.d, valid)
+        return mi.TensorXf(image, (height, width, len(ORDER_NAMES), len(self.wavelengths_nm)))
+
+    def render_directions(self, directions, seed: int, spp: int) -> mi.TensorXf:
+        """Radiance seen from the observer along given unit directions (array (M, 3), east-north-
+        up): a tensor (M, 4, N) like :meth:`render_orders`, without a sensor or pixel filter."""
+        directions = np.asarray(directions, dtype=np.float32).reshape(-1, 3)
+        count = directions.shape[0]
+        sampler, target = self._wavefront(seed, count, spp)
+        d = dr.gather(mi.Vector3f, mi.Vector3f(*(mi.Float(directions[:, i]) for i in range(3))), target)
+        image = self._estimate(sampler, target, count, spp, mi.Point3f(0.0), d, mi.Bool(True))
+        return mi.TensorXf(image, (count, len(ORDER_NAMES), len(self.wavelengths_nm)))
+
+    def _wavefront(self, seed, targets, spp):
+        """A seeded sampler for ``targets * spp`` samples and each sample's target index."""
+        wavefront = targets * spp
+        sampler = mi.load_dict({"type": "independent"})
+        sampler.seed(seed, wavefront)
+        return sampler, dr.arange(mi.UInt32, wavefront) // spp
+
+    def _estimate(self, sampler, target, targets, spp, origin, direction, valid):
+        """Trace one sample per lane and average into a flat (targets, 4, N) buffer."""
+        n = len(self.wavelengths_nm)
+        # Wavelength channels: index (j + k * stride) mod N, each grid wavelength carried with
+        # probability K / N.
+        stride = n // self.channels
+        first = dr.minimum(mi.UInt32(sampler.next_1d() * n), n - 1)
+        indices = [(first + k * stride) % n for k in range(self.channels)]
+        orders = self.trace(sampler, mi.Point3f(origin), mi.Vector3f(direction), indices, valid)
+        scale = n / (self.channels * spp)
+        image = dr.zeros(mi.Float, targets * len(ORDER_NAMES) * n)
+        for order, contribution in enumerate(orders):
+            for k, index in enumerate(indices):
+                slot = (target * len(ORDER_NAMES) + order) * n + index
+                dr.scatter_reduce(dr.ReduceOp.Add, image, contribution[k] * scale, slot, valid)
+        return image
+
+    # --- the path tracer ------------------------------------------------------------------------
+
+    def _segment(self, p, d, h):
+        """Distance to the end of the free segment from p along d, whether it ends on the
+        ground, and the altitude at its end."""
+        geometry = self.geometry
+        t_ground = geometry.distance_to_ground(p, d, h)
+        t_top = geometry.distance_to_top(p, d, h)
+        hits_ground = t_ground < t_top
+        return dr.select(hits_ground, t_ground, t_top), hits_ground, dr.select(hits_ground, 0.0, geometry.H)
+
+    def _majorant(self, channels, p, d, length, h, h_end):
+        h_low = self.geometry.lowest_altitude(p, d, length, h, h_end)
+        return MAJORANT_SAFETY * self.optics.majorant(channels, h_low, dr.maximum(h, h_end))
+
+    @dr.syntax
+    def sun_transmittance(self, sampler, p, h, direction, channels, active):
+        """Transmittance from p towards the sun by ratio tracking, per channel: the product over
+        tentative collisions of (1 - sigma_t / mu). Zero where the ground blocks the sun."""
+        geometry = self.geometry
+        blocked = geometry.distance_to_ground(p, direction, h) < dr.inf
+        remaining = geometry.distance_to_top(p, direction, h)
+        transmittance = mi.ArrayXf([mi.Float(1.0)] * self.channels)
+        transmittance = dr.select(blocked, 0.0, transmittance)
+        tracking = mi.Bool(active) & ~blocked
+        q = mi.Point3f(p)
+        hq = mi.Float(h)
+        while tracking:
+            majorant = self._majorant(channels, q, direction, remaining, hq, geometry.H)
+            t = -dr.log(1.0 - sampler.next_1d(tracking)) / majorant
+            tracking &= t < remaining
+            q = dr.select(tracking, q + t * direction, q)
+            remaining = dr.select(tracking, remaining - t, remaining)
+            hq = dr.select(tracking, geometry.altitude(q), hq)
+            _, _, sigma_t = self.optics.local(channels, hq)
+            transmittance = dr.select(tracking, transmittance * dr.maximum(1.0 - sigma_t / majorant, 0.0),
+                                      transmittance)
+            tracking &= dr.max(transmittance, axis=0) > 0.0
+        return transmittance
+
+    @dr.syntax
+    def trace(self, sampler, origin, direction, indices, active):
+        """Radiance along camera rays (origin in the observer frame, unit direction) for the
+        channels ``indices``: a list of 4 ArrayXf (K channels), one per scattering order."""
+        geometry, optics, sun = self.geometry, self.optics, self.sun
+        channels = optics.channel_coefficients(indices)
+        e_sun = sun.channel_irradiance(indices)
+        zero = mi.ArrayXf([mi.Float(0.0)] * self.channels)
+        direct, single, double, higher = zero, zero, zero, zero
+
+        p = mi.Point3f(origin)
+        d = mi.Vector3f(direction)
+        h = geometry.altitude(p)
+        # An observer above the atmosphere: move to where the ray enters it (or miss it).
+        outside = h >= geometry.H
+        t_entry = geometry.distance_to_entry(p, d, h)
+        enters = outside & (t_entry < dr.inf)
+        p = dr.select(enters, p + t_entry * d, p)
+        h = dr.select(enters, geometry.H, h)
+        misses = active & outside & ~enters
+        direct = dr.select(misses, e_sun * (sun.radiance_factor(dr.dot(d, sun.direction)) / sun.solid_angle), direct)
+
+        throughput = mi.ArrayXf([mi.Float(1.0)] * self.channels)
+        alive = mi.Bool(active) & ~misses
+        depth = mi.UInt32(0)
+        remaining, hits_ground, h_end = self._segment(p, d, h)
+
+        while alive:
+            majorant = self._majorant(channels, p, d, remaining, h, h_end)
+            t = -dr.log(1.0 - sampler.next_1d(alive)) / majorant
+            collides = alive & (t < remaining)
+            reaches_end = alive & ~collides
+
+            # -- tentative collision in the air: real scattering or null --------------------------
+            p = dr.select(collides, p + t * d, p)
+            remaining = dr.select(collides, remaining - t, remaining)
+            h = dr.select(collides, geometry.altitude(p), h)
+            parts, sigma_s, sigma_t = optics.local(channels, h)
+            null_weight = dr.maximum(majorant - sigma_t, 0.0)
+            a_scatter = dr.mean(dr.detach(throughput * sigma_s), axis=0)
+            a_null = dr.mean(dr.detach(throughput * null_weight), axis=0)
+            p_scatter = a_scatter / dr.maximum(a_scatter + a_null, 1e-30)
+            u_event = sampler.next_1d(alive)
+            scatters = collides & (u_event < p_scatter)
+            is_null = collides & ~scatters
+            throughput = dr.select(scatters, throughput * sigma_s / (majorant * p_scatter), throughput)
+            throughput = dr.select(is_null, throughput * null_weight / (majorant * (1.0 - p_scatter)), throughput)
+
+            # -- the segment ends: on the ground (a Lambertian vertex) or out into space -----------
+            p = dr.select(reaches_end, p + remaining * d, p)
+            h = dr.select(reaches_end, h_end, h)
+            on_ground = reaches_end & hits_ground
+            escapes = reaches_end & ~hits_ground
+            sees_sun = escapes & (depth == 0)
+            direct = dr.select(sees_sun, direct + throughput * e_sun
+                               * (sun.radiance_factor(dr.dot(d, sun.direction)) / sun.solid_angle), direct)
+            alive &= ~escapes
+
+            # -- next-event estimation to the sun at a scattering or ground vertex -----------------
+            vertex = scatters | on_ground
+            depth = dr.select(vertex, depth + 1, depth)
+            omega, sun_factor = sun.sample_direction(sampler.next_2d(alive))
+            up = geometry.up(p)
+            cos_ground = dr.maximum(dr.dot(up, omega), 0.0)
+            scattering_response = optics.phase(parts, sigma_s, dr.dot(d, omega))
+            response = dr.select(on_ground, channels.albedo * (cos_ground / math.pi), scattering_response)
+            transmittance = self.sun_transmittance(sampler, p, h, omega, channels, vertex)
+            contribution = throughput * response * transmittance * e_sun * sun_factor
+            single = dr.select(vertex & (depth == 1), single + contribution, single)
+            double = dr.select(vertex & (depth == 2), double + contribution, double)
+            higher = dr.select(vertex & (depth >= 3), higher + contribution, higher)
+
+            # -- continue the path: phase sampling in the air, cosine sampling on the ground --------
+            u_component = sampler.next_1d(alive)
+            u_direction = sampler.next_2d(alive)
+            mu, pdf = optics.sample_phase(parts, sigma_s, u_component, u_direction.x)
+            d_air = direction_with_cosine(d, mu, u_direction.y)
+            d_ground = mi.Frame3f(up).to_world(mi.warp.square_to_cosine_hemisphere(u_direction))
+            throughput = dr.select(scatters, throughput * optics.phase(parts, sigma_s, mu) / pdf, throughput)
+            throughput = dr.select(on_ground, throughput * channels.albedo, throughput)
+            d = dr.select(scatters, d_air, dr.select(on_ground, d_ground, d))
+            new_remaining, new_hits_ground, new_h_end = self._segment(p, d, h)
+            remaining = dr.select(vertex, new_remaining, remaining)
+            hits_ground = dr.select(vertex, new_hits_ground, hits_ground)
+            h_end = dr.select(vertex, new_h_end, h_end)
+
+            # -- Russian roulette and termination ------------------------------------------------
+            survival = dr.minimum(dr.max(dr.detach(throughput), axis=0), 0.95)
+            roulette = vertex & (depth >= ROULETTE_DEPTH)
+            survives = sampler.next_1d(alive) < survival
+            throughput = dr.select(roulette & survives, throughput / survival, throughput)
+            alive &= ~(roulette & ~survives)
+            alive &= (depth < self.max_depth) & (dr.max(throughput, axis=0) > 0.0)
+
+        return [direct, single, double, higher]
+
+
+def register():
+    mi.register_integrator("atmosphere", lambda props: AtmosphereIntegrator(props))

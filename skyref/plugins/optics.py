@@ -1,0 +1,291 @@
+"""The atmosphere's optics on Dr.Jit arrays: coefficients, majorants and phase functions.
+
+:class:`AtmosphereOptics` turns a :class:`skyref.atmosphere.Atmosphere` into what a kernel
+needs, for the wavelengths of a fixed grid (the renderer's wavelength list; RGB = 680/550/440
+nm). It is shared by the ``atmosphere`` integrator, medium and phase plugins, so all of them
+see the same numbers as the NumPy model, and it holds the differentiable parameters:
+
+=================================  =========================================================
+``<name>.density_scale``           multiplies a constituent's coefficients (Rayleigh: pressure)
+``<aerosol>.angstrom_alpha/beta``  Angstrom exponent and turbidity coefficient (aerosol)
+``<aerosol>.single_scattering_albedo``
+``<aerosol>.g``                    Cornette–Shanks (or Henyey–Greenstein) parameter
+``<absorber>.column_du``           column amount of an absorber, Dobson units
+``ground_albedo``                  Lambertian albedo (a scalar, or one value per grid wavelength)
+=================================  =========================================================
+
+Only constituents that the atmosphere contains produce kernel code: an atmosphere without
+aerosol has no Mie branch, one without ozone no absorption term.
+
+Coefficients are "at relative density 1" (m^-1) per channel; a channel is an index into the
+wavelength grid, and a path carries K channels as an ``ArrayXf``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from skyref.atmosphere import phase as phase_model
+from skyref.atmosphere.constituents import angstrom_extinction
+from skyref.atmosphere.spectra import DOBSON_UNIT_PER_M2, ConstantSpectrum
+from skyref.plugins.drjit_namespace import xp
+
+
+def _opaque(value) -> mi.Float:
+    """A differentiable kernel parameter (opaque: changing it does not recompile kernels)."""
+    return dr.opaque(mi.Float, value) if np.ndim(value) == 0 else mi.Float(np.asarray(value, np.float32))
+
+
+class ConstituentOptics:
+    """One constituent on the grid. ``params`` maps short names to Dr.Jit values."""
+
+    def __init__(self, constituent, wavelengths_nm: np.ndarray):
+        self.model = constituent
+        self.name = constituent.name
+        self.kind = constituent.kind
+        self.profile = constituent.profile
+        self.wavelengths = mi.Float(wavelengths_nm.astype(np.float32))
+        self.params = {}
+        self.tables = {}
+        if self.kind == "rayleigh":
+            self.params["density_scale"] = _opaque(constituent.density_scale)
+            self.tables["scattering"] = mi.Float(constituent.scattering(wavelengths_nm).astype(np.float32))
+        elif self.kind == "aerosol":
+            self.params["density_scale"] = _opaque(constituent.density_scale)
+            self.params["single_scattering_albedo"] = _opaque(constituent.single_scattering_albedo)
+            if constituent.extinction is None:
+                self.params["angstrom_alpha"] = _opaque(constituent.angstrom_alpha)
+                self.params["angstrom_beta"] = _opaque(constituent.angstrom_beta)
+                self.column_m = constituent.profile.column()
+            else:
+                self.tables["extinction"] = mi.Float(constituent.extinction(wavelengths_nm).astype(np.float32))
+            if constituent.phase.kind in ("cornette_shanks", "henyey_greenstein"):
+                self.params["g"] = _opaque(constituent.phase.g)
+        elif self.kind == "absorber":
+            self.tables["cross_section_per_du"] = mi.Float(
+                (constituent.cross_section(wavelengths_nm) * DOBSON_UNIT_PER_M2
+                 / constituent.profile.column()).astype(np.float32) if constituent.column_du is not None
+                else (constituent.cross_section(wavelengths_nm) * constituent.number_density_per_m3).astype(np.float32))
+            if constituent.column_du is not None:
+                self.params["column_du"] = _opaque(constituent.column_du)
+        self.phase_kind = constituent.phase.kind if constituent.phase is not None else None
+        if self.phase_kind == "tabulated":
+            self.tables["phase_cosines"] = mi.Float(np.asarray(constituent.phase.cosines, np.float32))
+            self.tables["phase_values"] = mi.Float(np.asarray(constituent.phase.values, np.float32))
+            self.sampling_g = float(np.clip(constituent.phase.asymmetry, -0.95, 0.95))
+
+    @property
+    def scatters(self) -> bool:
+        return self.phase_kind is not None
+
+    # --- coefficients at relative density 1, per channel ----------------------------------------
+
+    def coefficients(self, index: mi.UInt32):
+        """(scattering, absorption) coefficients in m^-1 at relative density 1 for grid index
+        ``index``; ``None`` stands for an identically zero term."""
+        p = self.params
+        if self.kind == "rayleigh":
+            return p["density_scale"] * dr.gather(mi.Float, self.tables["scattering"], index), None
+        if self.kind == "aerosol":
+            if "extinction" in self.tables:
+                extinction = dr.gather(mi.Float, self.tables["extinction"], index)
+            else:
+                wl = dr.gather(mi.Float, self.wavelengths, index)
+                extinction = angstrom_extinction(wl, p["angstrom_alpha"], p["angstrom_beta"], self.column_m, xp)
+            extinction = p["density_scale"] * extinction
+            albedo = p["single_scattering_albedo"]
+            return albedo * extinction, (1.0 - albedo) * extinction
+        amount = p.get("column_du", 1.0)
+        return None, amount * dr.gather(mi.Float, self.tables["cross_section_per_du"], index)
+
+    def density(self, altitude):
+        return self.profile.density(altitude, xp)
+
+    # --- phase function -------------------------------------------------------------------
+
+    def phase(self, mu):
+        """p(mu), sr^-1, mu = cosine between incident and scattered propagation directions."""
+        if self.phase_kind == "rayleigh":
+            return phase_model.rayleigh_phase(mu, xp)
+        if self.phase_kind == "cornette_shanks":
+            return phase_model.cornette_shanks_phase(mu, self.params["g"], xp)
+        if self.phase_kind == "henyey_greenstein":
+            return phase_model.henyey_greenstein_phase(mu, self.params["g"], xp)
+        cosines, values = self.tables["phase_cosines"], self.tables["phase_values"]
+        n = dr.width(cosines)
+        i = dr.binary_search(0, n - 2, lambda j: dr.gather(mi.Float, cosines, j + 1) < mu)
+        x0, x1 = dr.gather(mi.Float, cosines, i), dr.gather(mi.Float, cosines, i + 1)
+        y0, y1 = dr.gather(mi.Float, values, i), dr.gather(mi.Float, values, i + 1)
+        return dr.lerp(y0, y1, dr.clip((mu - x0) / (x1 - x0), 0.0, 1.0))
+
+    def sample_cosine(self, u):
+        """Sample mu for this component's *sampling* density; return (mu, pdf(mu) in sr^-1).
+        Rayleigh and Henyey–Greenstein are sampled exactly; Cornette–Shanks and tabulated phases
+        through Henyey–Greenstein, the difference being carried by the weight p / pdf."""
+        if self.phase_kind == "rayleigh":
+            mu = sample_rayleigh_cosine(u)
+            return mu, phase_model.rayleigh_phase(mu, xp)
+        g = dr.detach(self.params["g"]) if "g" in self.params else self.sampling_g
+        mu = sample_henyey_greenstein_cosine(u, g)
+        return mu, phase_model.henyey_greenstein_phase(mu, g, xp)
+
+    def sampling_pdf(self, mu):
+        if self.phase_kind == "rayleigh":
+            return phase_model.rayleigh_phase(mu, xp)
+        g = dr.detach(self.params["g"]) if "g" in self.params else self.sampling_g
+        return phase_model.henyey_greenstein_phase(mu, g, xp)
+
+
+def sample_rayleigh_cosine(u):
+    """Invert the Rayleigh CDF F(mu) = (mu^3 + 3 mu + 4) / 8 exactly (Cardano): with
+    v = 4u - 2 and B = cbrt(|v| + sqrt(v^2 + 1)), mu = sign(v) (B - 1/B)."""
+    v = 4.0 * u - 2.0
+    b = dr.cbrt(dr.abs(v) + dr.sqrt(v * v + 1.0))
+    return dr.clip(dr.copysign(b - dr.rcp(b), v), -1.0, 1.0)
+
+
+def sample_henyey_greenstein_cosine(u, g):
+    """Invert the Henyey–Greenstein CDF: mu = (1 + g^2 - ((1 - g^2) / (1 - g + 2 g u))^2) / (2g),
+    and mu = 2u - 1 for |g| < 1e-3."""
+    g = mi.Float(g)
+    sq = (1.0 - g * g) / (1.0 - g + 2.0 * g * u)
+    mu = (1.0 + g * g - sq * sq) / (2.0 * g)
+    return dr.clip(dr.select(dr.abs(g) < 1e-3, 2.0 * u - 1.0, mu), -1.0, 1.0)
+
+
+class AtmosphereOptics:
+    """All constituents plus the ground albedo on a wavelength grid (see module docstring)."""
+
+    def __init__(self, atmosphere, wavelengths_nm):
+        self.atmosphere = atmosphere
+        self.wavelengths_nm = np.asarray(atmosphere.check_wavelengths(wavelengths_nm), dtype=np.float64)
+        self.components = [ConstituentOptics(c, self.wavelengths_nm) for c in atmosphere.constituents]
+        albedo = atmosphere.ground_albedo
+        if isinstance(albedo, ConstantSpectrum):
+            self.ground_albedo = _opaque(albedo.value)
+        else:
+            self.ground_albedo = mi.Float(albedo(self.wavelengths_nm).astype(np.float32))
+        self.scattering_components = [c for c in self.components if c.scatters]
+
+    # --- parameters (mi.traverse) ---------------------------------------------------------------
+
+    def parameters(self) -> dict:
+        """name -> Dr.Jit value of every differentiable parameter."""
+        params = {"ground_albedo": self.ground_albedo}
+        for c in self.components:
+            for key, value in c.params.items():
+                params[f"{c.name}.{key}"] = value
+        return params
+
+    def set_parameter(self, name: str, value):
+        if name == "ground_albedo":
+            self.ground_albedo = value
+            return
+        constituent, key = name.split(".", 1)
+        for c in self.components:
+            if c.name == constituent and key in c.params:
+                c.params[key] = value
+                return
+        raise KeyError(name)
+
+    # --- per-path channel data ------------------------------------------------------------------
+
+    def channel_coefficients(self, indices) -> "PathChannels":
+        """Everything a path needs for its channels (list of UInt32 grid indices)."""
+        coefficients = []
+        for c in self.components:
+            per_channel = [c.coefficients(i) for i in indices]
+            s = None if per_channel[0][0] is None else mi.ArrayXf([x[0] for x in per_channel])
+            a = None if per_channel[0][1] is None else mi.ArrayXf([x[1] for x in per_channel])
+            coefficients.append((s, a))
+        per_wavelength = dr.width(self.ground_albedo) > 1
+        albedo = mi.ArrayXf([dr.gather(mi.Float, self.ground_albedo, i if per_wavelength else 0 * i)
+                             for i in indices])
+        return PathChannels(len(indices), coefficients, albedo)
+
+    def majorant(self, channels: "PathChannels", h_low, h_high):
+        """A grey majorant of the extinction over altitudes [h_low, h_high], m^-1: the sum over
+        constituents of (largest coefficient over the channels) x (largest density in range)."""
+        total = mi.Float(0.0)
+        for c, bound in zip(self.components, channels.bounds):
+            total += bound * dr.detach(c.profile.max_density(h_low, h_high, xp))
+        return total
+
+    def local(self, channels: "PathChannels", altitude):
+        """Local coefficients at ``altitude``, per channel, m^-1: (sigma_s of each component
+        (ArrayXf, or None for absorbers), total sigma_s, total sigma_t)."""
+        sigma_s_parts = []
+        sigma_s = channels.zeros()
+        sigma_t = channels.zeros()
+        for c, (s, a) in zip(self.components, channels.coefficients):
+            rho = c.density(altitude)
+            part_s = None if s is None else s * rho
+            sigma_s_parts.append(part_s)
+            if part_s is not None:
+                sigma_s = sigma_s + part_s
+                sigma_t = sigma_t + part_s
+            if a is not None:
+                sigma_t = sigma_t + a * rho
+        return sigma_s_parts, sigma_s, sigma_t
+
+    def phase(self, sigma_s_parts, sigma_s, mu):
+        """The local mixture phase function per channel: sum_i sigma_s,i p_i(mu) / sigma_s."""
+        total = 0.0 * sigma_s
+        for c, part in zip(self.components, sigma_s_parts):
+            if part is not None:
+                total = total + part * c.phase(mu)
+        return total / dr.maximum(sigma_s, 1e-30)
+
+    def sample_phase(self, sigma_s_parts, sigma_s, u_component, u_mu):
+        """Sample a scattering-angle cosine from the mixture of the components' sampling
+        densities, component i chosen with probability P_i = mean over channels of
+        sigma_s,i / sigma_s. Returns (mu, mixture pdf) — one-sample MIS, so the weight
+        phase / pdf stays bounded whichever component produced mu."""
+        comps = [(c, part) for c, part in zip(self.components, sigma_s_parts) if part is not None]
+        if not comps:  # nothing scatters: never called for a real path, any valid direction will do
+            return mi.Float(1.0), mi.Float(1.0)
+        if len(comps) == 1:
+            return comps[0][0].sample_cosine(u_mu)
+        inv = dr.rcp(dr.maximum(dr.detach(sigma_s), 1e-30))
+        probabilities = [dr.mean(dr.detach(part) * inv, axis=0) for _, part in comps]
+        # Walk the cumulative probabilities; the last component takes whatever rounding left.
+        mu = comps[-1][0].sample_cosine(u_mu)[0]
+        cumulative = mi.Float(0.0)
+        for (c, _), prob in zip(comps[:-1], probabilities[:-1]):
+            chosen = (u_component >= cumulative) & (u_component < cumulative + prob)
+            mu = dr.select(chosen, c.sample_cosine(u_mu)[0], mu)
+            cumulative = cumulative + prob
+        pdf = mi.Float(0.0)
+        for (c, _), prob in zip(comps, probabilities):
+            pdf += prob * c.sampling_pdf(mu)
+        return mu, pdf
+
+
+def direction_with_cosine(d, mu, u_phi):
+    """A unit vector at angle acos(mu) from ``d``, at azimuth 2 pi u_phi around it."""
+    frame = mi.Frame3f(d)
+    sin_theta = dr.safe_sqrt(1.0 - mu * mu)
+    sin_phi, cos_phi = dr.sincos(2.0 * math.pi * u_phi)
+    return frame.to_world(mi.Vector3f(sin_theta * cos_phi, sin_theta * sin_phi, mu))
+
+
+class PathChannels:
+    """A path's K channels: per component (scattering, absorption) coefficients at relative
+    density 1 as ArrayXf (None for a zero term), the ground albedo, and per component the largest
+    extinction over the channels (detached; for majorants)."""
+
+    def __init__(self, count, coefficients, albedo):
+        self.count = count
+        self.coefficients = coefficients
+        self.albedo = albedo
+        self.bounds = []
+        for s, a in coefficients:
+            total = s if a is None else (a if s is None else s + a)
+            self.bounds.append(dr.detach(dr.max(total, axis=0)))
+
+    def zeros(self):
+        return mi.ArrayXf([mi.Float(0.0)] * self.count)

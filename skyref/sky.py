@@ -1,0 +1,48 @@
+"""``Sky``: a rendered sky, the product every skyref job consumes.
+
+Radiance is spectral: ``radiance[row, column, k]`` is in W m^-2 sr^-1 nm^-1 at
+``wavelengths_nm[k]``. Every sky carries its own Monte Carlo error bar (``standard_error``,
+same shape, from the spread of independent passes) and its decomposition by scattering order.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+#: Names of the per-order layers: the sun seen directly (through the atmosphere), light
+#: scattered once, twice, and three or more times (a ground reflection counts as a scattering).
+ORDER_NAMES = ("sun_direct", "single", "double", "higher")
+
+
+@dataclass
+class Sky:
+    radiance: np.ndarray                 # (H, W, N) W m^-2 sr^-1 nm^-1
+    standard_error: np.ndarray           # (H, W, N) same unit: standard error of the mean
+    wavelengths_nm: np.ndarray           # (N,)
+    directions: np.ndarray               # (H, W, 3) unit view direction of each pixel centre, east-north-up
+    orders: dict = field(default_factory=dict)   # name in ORDER_NAMES -> (H, W, N)
+    scene: object = None                 # the skyref.scene.Scene that was rendered
+    metadata: dict = field(default_factory=dict)
+
+    @property
+    def shape(self) -> tuple:
+        return self.radiance.shape
+
+    def relative_error(self) -> np.ndarray:
+        """Standard error / radiance per pixel and wavelength (NaN where radiance is 0)."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(self.radiance > 0, self.standard_error / self.radiance, np.nan)
+
+    def rgb(self) -> np.ndarray:
+        """Linear sRGB (D65 white, absolute: Y in cd m^-2 / 683 ... see skyref.color)."""
+        from skyref.color import spectral_to_linear_srgb
+
+        return spectral_to_linear_srgb(self.radiance, self.wavelengths_nm)
+
+    def luminance(self) -> np.ndarray:
+        """Luminance, cd m^-2."""
+        from skyref.color import spectral_to_luminance
+
+        return spectral_to_luminance(self.radiance, self.wavelengths_nm)
