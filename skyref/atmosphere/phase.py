@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from skyref.atmosphere.validation import check_array, check_number
+from skyref.errors import ParameterError
 
 INV_4PI = 1.0 / (4.0 * math.pi)
 
@@ -128,10 +129,12 @@ class TabulatedPhase(PhaseFunction):
         mu = check_array("cosines", self.cosines, -1.0, 1.0, min_length=2, increasing=True)
         p = check_array("values", self.values, 0.0, math.inf, min_length=2)
         if mu[0] != -1.0 or mu[-1] != 1.0 or p.size != mu.size:
-            raise ValueError("cosines must run from -1 to 1 and pair up with values")
+            raise ParameterError("cosines", list(self.cosines), "from -1 to 1, one per value",
+                                 "does not span [-1, 1] or pair up with values")
         norm = 2.0 * math.pi * float(np.sum(0.5 * (p[1:] + p[:-1]) * np.diff(mu)))
         if norm <= 0.0:
-            raise ValueError("values: the phase function integrates to zero")
+            raise ParameterError("values", list(self.values), "a phase function with a positive integral",
+                                 "integrates to zero")
         object.__setattr__(self, "cosines", tuple(float(x) for x in mu))
         object.__setattr__(self, "values", tuple(float(x) / norm for x in p))
 

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from skyref.atmosphere.validation import check_array, check_number
+from skyref.errors import ParameterError
 
 #: Largest altitude any profile accepts, m (well above any atmosphere top we model).
 MAX_ALTITUDE_M = 1.0e7
@@ -92,8 +93,8 @@ class PiecewiseLinearProfile(DensityProfile):
                         min_length=2, increasing=True)
         d = check_array("densities", self.densities, 0.0, math.inf, min_length=2)
         if d.size != h.size:
-            raise ValueError(f"densities has {d.size} entries but altitudes_m has {h.size}; "
-                             "they must pair up")
+            raise ParameterError("densities", list(self.densities), f"{h.size} numbers, one per altitude",
+                                 f"{d.size} densities for {h.size} altitudes")
         object.__setattr__(self, "altitudes_m", tuple(float(x) for x in h))
         object.__setattr__(self, "densities", tuple(float(x) for x in d))
 

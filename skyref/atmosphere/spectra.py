@@ -110,7 +110,8 @@ class TabulatedSpectrum(Spectrum):
                          min_length=1, increasing=True)
         values = check_array("values", self.values, min_length=1)
         if wl.size != values.size:
-            raise ValueError(f"values has {values.size} entries but wavelengths_nm has {wl.size}")
+            raise ParameterError("values", list(self.values), f"{wl.size} numbers, one per wavelength",
+                                 f"{values.size} values for {wl.size} wavelengths")
         object.__setattr__(self, "wavelengths_nm", tuple(float(x) for x in wl))
         object.__setattr__(self, "values", tuple(float(x) for x in values))
         object.__setattr__(self, "valid_range_nm", (wl[0], wl[-1]))

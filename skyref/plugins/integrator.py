@@ -206,6 +206,21 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         image = self._estimate(sampler, target, count, spp, mi.Point3f(0.0), d, mi.Bool(True))
         return mi.TensorXf(image, (count, len(ORDER_NAMES), len(self.wavelengths_nm)))
 
+    def directional_derivative(self, directions, parameter: str, seed: int, spp: int):
+        """Radiance along ``directions`` (as :meth:`render_directions`) and its derivative with
+        respect to one parameter (a name from ``mi.traverse``), by forward-mode automatic
+        differentiation through the path tracer. Returns two (M, 4, N) NumPy arrays."""
+        original = self.optics.parameters()[parameter]
+        value = mi.Float(original)
+        dr.enable_grad(value)
+        self.optics.set_parameter(parameter, value)
+        try:
+            radiance = self.render_directions(directions, seed, spp)
+            dr.forward(value)
+            return radiance.numpy(), dr.grad(radiance).numpy()
+        finally:
+            self.optics.set_parameter(parameter, original)
+
     def _wavefront(self, seed, targets, spp):
         """A seeded sampler for ``targets * spp`` samples and each sample's target index."""
         wavefront = targets * spp
@@ -246,105 +261,123 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         return MAJORANT_SAFETY * self.optics.majorant(channels, h_low, dr.maximum(h, h_end))
 
     @dr.syntax
-    def sun_transmittance(self, sampler, p, h, direction, channels, active):
-        """Transmittance from p towards the sun by ratio tracking, per channel: the product over
-        tentative collisions of (1 - sigma_t / mu). Zero where the ground blocks the sun."""
-        geometry = self.geometry
-        blocked = geometry.distance_to_ground(p, direction, h) < dr.inf
-        remaining = geometry.distance_to_top(p, direction, h)
-        transmittance = mi.ArrayXf([mi.Float(1.0)] * self.channels)
-        transmittance = dr.select(blocked, 0.0, transmittance)
-        tracking = mi.Bool(active) & ~blocked
-        q = mi.Point3f(p)
-        hq = mi.Float(h)
-        while tracking:
-            majorant = self._majorant(channels, q, direction, remaining, hq, geometry.H)
-            t = -dr.log(1.0 - sampler.next_1d(tracking)) / majorant
-            tracking &= t < remaining
-            q = dr.select(tracking, q + t * direction, q)
-            remaining = dr.select(tracking, remaining - t, remaining)
-            hq = dr.select(tracking, geometry.altitude(q), hq)
-            _, _, sigma_t = self.optics.local(channels, hq)
-            transmittance = dr.select(tracking, transmittance * dr.maximum(1.0 - sigma_t / majorant, 0.0),
-                                      transmittance)
-            tracking &= dr.max(transmittance, axis=0) > 0.0
-        return transmittance
-
-    @dr.syntax
     def trace(self, sampler, origin, direction, indices, active):
         """Radiance along camera rays (origin in the observer frame, unit direction) for the
-        channels ``indices``: a list of 4 ArrayXf (K channels), one per scattering order."""
+        channels ``indices``: a list of 4 ArrayXf (K channels), one per scattering order.
+
+        One loop does everything, one tracking step per iteration, so that it stays a single
+        symbolic loop (fast, and differentiable in forward mode: Dr.Jit 1.5 miscompiles forward
+        derivatives of nested symbolic loops). A lane is either *tracking its path* (delta/
+        spectral tracking along the current segment) or *tracking a shadow ray* to the sun (ratio
+        tracking, started at each vertex); the shadow ray's result is filed when it leaves the
+        atmosphere, and the path then goes on from the vertex in its already sampled direction.
+        """
         geometry, optics, sun = self.geometry, self.optics, self.sun
         channels = optics.channel_coefficients(indices)
         e_sun = sun.channel_irradiance(indices)
-        zero = mi.ArrayXf([mi.Float(0.0)] * self.channels)
-        direct, single, double, higher = zero, zero, zero, zero
+        direct, single, double, higher = channels.zeros(), channels.zeros(), channels.zeros(), channels.zeros()
 
+        # -- the camera ray; an observer above the atmosphere first moves to where it enters ------
         p = mi.Point3f(origin)
         d = mi.Vector3f(direction)
         h = geometry.altitude(p)
-        # An observer above the atmosphere: move to where the ray enters it (or miss it).
         outside = h >= geometry.H
         t_entry = geometry.distance_to_entry(p, d, h)
         enters = outside & (t_entry < dr.inf)
         p = dr.select(enters, p + t_entry * d, p)
         h = dr.select(enters, geometry.H, h)
-        misses = active & outside & ~enters
+        misses = mi.Bool(active) & outside & ~enters
         direct = dr.select(misses, e_sun * (sun.radiance_factor(dr.dot(d, sun.direction)) / sun.solid_angle), direct)
 
-        throughput = mi.ArrayXf([mi.Float(1.0)] * self.channels)
+        throughput = channels.zeros() + 1.0
         alive = mi.Bool(active) & ~misses
         depth = mi.UInt32(0)
         remaining, hits_ground, h_end = self._segment(p, d, h)
 
-        while alive:
-            majorant = self._majorant(channels, p, d, remaining, h, h_end)
-            t = -dr.log(1.0 - sampler.next_1d(alive)) / majorant
-            collides = alive & (t < remaining)
-            reaches_end = alive & ~collides
+        # -- the shadow ray in flight (one at a time per lane) ----------------------------------
+        in_shadow = mi.Bool(False)
+        q = mi.Point3f(p)
+        omega = mi.Vector3f(d)
+        q_remaining = mi.Float(0.0)
+        hq = mi.Float(h)
+        transmittance = channels.zeros()
+        pending = channels.zeros()         # throughput x response x E_sun of the vertex
+        pending_order = mi.UInt32(0)
 
-            # -- tentative collision in the air: real scattering or null --------------------------
-            p = dr.select(collides, p + t * d, p)
+        while dr.hint(alive | in_shadow, label="atmosphere path"):
+            # -- one tracking step along the current ray (the shadow ray if one is in flight) ----
+            x = dr.select(in_shadow, q, p)
+            w = dr.select(in_shadow, omega, d)
+            length = dr.select(in_shadow, q_remaining, remaining)
+            hx = dr.select(in_shadow, hq, h)
+            hx_end = dr.select(in_shadow, geometry.H, h_end)
+            majorant = self._majorant(channels, x, w, length, hx, hx_end)
+            t = -dr.log(1.0 - sampler.next_1d()) / majorant
+            collides = t < length
+            x = dr.select(collides, x + t * w, x)
+            hx = dr.select(collides, geometry.altitude(x), hx)
+            parts, sigma_s, sigma_t = optics.local(channels, hx)
+
+            # -- shadow ray: ratio tracking; file the contribution when it leaves -------------------
+            shadow_step = in_shadow & collides
+            transmittance = dr.select(shadow_step, transmittance * dr.maximum(1.0 - sigma_t / majorant, 0.0),
+                                      transmittance)
+            q = dr.select(shadow_step, x, q)
+            hq = dr.select(shadow_step, hx, hq)
+            q_remaining = dr.select(shadow_step, q_remaining - t, q_remaining)
+            shadow_done = in_shadow & (~collides | (dr.max(transmittance, axis=0) <= 0.0))
+            contribution = pending * transmittance
+            single = dr.select(shadow_done & (pending_order == 1), single + contribution, single)
+            double = dr.select(shadow_done & (pending_order == 2), double + contribution, double)
+            higher = dr.select(shadow_done & (pending_order >= 3), higher + contribution, higher)
+            tracking_path = alive & ~in_shadow
+            in_shadow &= ~shadow_done
+
+            # -- path: tentative collision in the air, real scattering or null ------------------
+            collides &= tracking_path
+            reaches_end = tracking_path & ~collides
+            p = dr.select(collides, x, p)
+            h = dr.select(collides, hx, h)
             remaining = dr.select(collides, remaining - t, remaining)
-            h = dr.select(collides, geometry.altitude(p), h)
-            parts, sigma_s, sigma_t = optics.local(channels, h)
             null_weight = dr.maximum(majorant - sigma_t, 0.0)
             a_scatter = dr.mean(dr.detach(throughput * sigma_s), axis=0)
             a_null = dr.mean(dr.detach(throughput * null_weight), axis=0)
             p_scatter = a_scatter / dr.maximum(a_scatter + a_null, 1e-30)
-            u_event = sampler.next_1d(alive)
-            scatters = collides & (u_event < p_scatter)
+            scatters = collides & (sampler.next_1d() < p_scatter)
             is_null = collides & ~scatters
             throughput = dr.select(scatters, throughput * sigma_s / (majorant * p_scatter), throughput)
             throughput = dr.select(is_null, throughput * null_weight / (majorant * (1.0 - p_scatter)), throughput)
 
-            # -- the segment ends: on the ground (a Lambertian vertex) or out into space -----------
+            # -- path: the segment ends on the ground (a Lambertian vertex) or in space -----------
             p = dr.select(reaches_end, p + remaining * d, p)
             h = dr.select(reaches_end, h_end, h)
             on_ground = reaches_end & hits_ground
             escapes = reaches_end & ~hits_ground
-            sees_sun = escapes & (depth == 0)
-            direct = dr.select(sees_sun, direct + throughput * e_sun
+            direct = dr.select(escapes & (depth == 0), direct + throughput * e_sun
                                * (sun.radiance_factor(dr.dot(d, sun.direction)) / sun.solid_angle), direct)
             alive &= ~escapes
 
-            # -- next-event estimation to the sun at a scattering or ground vertex -----------------
+            # -- vertex: start the shadow ray (next-event estimation to the sun) ------------------
             vertex = scatters | on_ground
             depth = dr.select(vertex, depth + 1, depth)
-            omega, sun_factor = sun.sample_direction(sampler.next_2d(alive))
+            sun_direction, sun_factor = sun.sample_direction(sampler.next_2d())
             up = geometry.up(p)
-            cos_ground = dr.maximum(dr.dot(up, omega), 0.0)
-            scattering_response = optics.phase(parts, sigma_s, dr.dot(d, omega))
-            response = dr.select(on_ground, channels.albedo * (cos_ground / math.pi), scattering_response)
-            transmittance = self.sun_transmittance(sampler, p, h, omega, channels, vertex)
-            contribution = throughput * response * transmittance * e_sun * sun_factor
-            single = dr.select(vertex & (depth == 1), single + contribution, single)
-            double = dr.select(vertex & (depth == 2), double + contribution, double)
-            higher = dr.select(vertex & (depth >= 3), higher + contribution, higher)
+            response = dr.select(on_ground,
+                                 channels.albedo * (dr.maximum(dr.dot(up, sun_direction), 0.0) / math.pi),
+                                 optics.phase(parts, sigma_s, dr.dot(d, sun_direction)))
+            visible = vertex & (geometry.distance_to_ground(p, sun_direction, h) == dr.inf)
+            in_shadow |= visible
+            q = dr.select(visible, p, q)
+            hq = dr.select(visible, h, hq)
+            omega = dr.select(visible, sun_direction, omega)
+            q_remaining = dr.select(visible, geometry.distance_to_top(p, sun_direction, h), q_remaining)
+            transmittance = dr.select(visible, 1.0, transmittance)
+            pending = dr.select(visible, throughput * response * e_sun * sun_factor, pending)
+            pending_order = dr.select(visible, depth, pending_order)
 
-            # -- continue the path: phase sampling in the air, cosine sampling on the ground --------
-            u_component = sampler.next_1d(alive)
-            u_direction = sampler.next_2d(alive)
+            # -- vertex: continue the path (phase sampling in the air, cosine on the ground) -------
+            u_component = sampler.next_1d()
+            u_direction = sampler.next_2d()
             mu, pdf = optics.sample_phase(parts, sigma_s, u_component, u_direction.x)
             d_air = direction_with_cosine(d, mu, u_direction.y)
             d_ground = mi.Frame3f(up).to_world(mi.warp.square_to_cosine_hemisphere(u_direction))
@@ -359,7 +392,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             # -- Russian roulette and termination ------------------------------------------------
             survival = dr.minimum(dr.max(dr.detach(throughput), axis=0), 0.95)
             roulette = vertex & (depth >= ROULETTE_DEPTH)
-            survives = sampler.next_1d(alive) < survival
+            survives = sampler.next_1d() < survival
             throughput = dr.select(roulette & survives, throughput / survival, throughput)
             alive &= ~(roulette & ~survives)
             alive &= (depth < self.max_depth) & (dr.max(throughput, axis=0) > 0.0)

@@ -1,0 +1,131 @@
+"""``render_sky``: render a :class:`~skyref.scene.Scene` with the ``atmosphere`` integrator.
+
+The samples per pixel are split into ``passes`` independent passes (distinct seeds); the sky is
+their mean and its standard error the spread of the pass means / sqrt(passes). Each pass is
+traced in chunks of at most :data:`MAX_WAVEFRONT` samples so memory stays bounded.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from skyref.errors import ParameterError
+from skyref.sky import ORDER_NAMES, Sky
+
+#: Most samples traced at once (bounds memory: ~100 bytes of state per sample and channel).
+MAX_WAVEFRONT = 1 << 21
+
+GEOMETRIES = ("spherical", "plane_parallel")
+
+
+def sensor_dict(camera) -> dict:
+    """The Mitsuba sensor for a :class:`~skyref.scene.Camera` (observer at the origin of the
+    east-north-up frame): skyref's ``equirectangular`` / ``fisheye`` or stock ``perspective``."""
+    import mitsuba as mi
+
+    from skyref.projection import camera_to_world
+
+    sensor = {"type": camera.type,
+              "to_world": mi.ScalarTransform4f(camera_to_world(camera).tolist()),
+              "film": {"type": "hdrfilm", "width": camera.width, "height": camera.height,
+                       "rfilter": {"type": "box"}, "pixel_format": "rgb"}}
+    if camera.type == "fisheye":
+        sensor["fov"] = camera.fov_deg
+    elif camera.type == "perspective":
+        sensor.update(fov=camera.fov_deg, fov_axis="x")
+    return sensor
+
+
+def build_integrator(scene, geometry: str = "spherical", wavelengths_per_path: int = 0):
+    """An ``atmosphere`` integrator configured for ``scene`` (Mitsuba must be loaded)."""
+    import mitsuba as mi
+
+    from skyref.plugins.integrator import AtmosphereIntegrator
+
+    integrator = AtmosphereIntegrator(mi.Properties())
+    integrator.configure(scene.atmosphere, scene.wavelengths_nm, scene.sun.zenith_deg, scene.sun.azimuth_deg,
+                         scene.sun.angular_radius_deg, scene.sun.limb_darkening, scene.observer.altitude_m,
+                         geometry=geometry, max_depth=scene.render.max_depth,
+                         wavelengths_per_path=wavelengths_per_path)
+    return integrator
+
+
+def _chunks(spp: int, pixels: int) -> list[int]:
+    """Split ``spp`` samples per pixel into chunks of at most MAX_WAVEFRONT samples."""
+    per_chunk = max(1, min(spp, MAX_WAVEFRONT // max(pixels, 1)))
+    sizes = [per_chunk] * (spp // per_chunk)
+    if spp % per_chunk:
+        sizes.append(spp % per_chunk)
+    return sizes
+
+
+def render_sky(scene, spp: int | None = None, passes: int | None = None, seed: int | None = None,
+               variant: str | None = None, geometry: str = "spherical", wavelengths_per_path: int = 0,
+               progress: bool = False) -> Sky:
+    """Render ``scene``; ``spp``, ``passes`` and ``seed`` override the scene's render settings.
+
+    Returns a :class:`~skyref.sky.Sky`: radiance (H, W, N) in W m^-2 sr^-1 nm^-1 at the scene's
+    wavelengths, its standard error, one layer per scattering order, pixel directions, and
+    metadata (samples, time, throughput, variant). ``geometry="plane_parallel"`` flattens the
+    planet (for comparisons with plane-parallel solvers such as DISORT).
+    """
+    from skyref.atmosphere.validation import check_choice
+    from skyref.plugins import load_mitsuba
+    from skyref.projection import pixel_directions
+    from skyref.scene import RenderSettings
+
+    check_choice("geometry", geometry, GEOMETRIES)
+    settings = RenderSettings(spp=scene.render.spp if spp is None else spp,
+                              passes=scene.render.passes if passes is None else passes,
+                              seed=scene.render.seed if seed is None else seed,
+                              max_depth=scene.render.max_depth)
+    if settings.spp < settings.passes:
+        raise ParameterError("spp", settings.spp, f">= passes ({settings.passes})", "too few samples")
+    spp_per_pass = settings.spp // settings.passes
+
+    mi = load_mitsuba(variant)
+    integrator = build_integrator(scene.replace(render=settings), geometry, wavelengths_per_path)
+    sensor = mi.load_dict(sensor_dict(scene.camera))
+    camera = scene.camera
+    chunks = _chunks(spp_per_pass, camera.width * camera.height)
+
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=settings.passes * spp_per_pass, unit="spp", desc=f"render {scene.name or 'sky'}")
+    start = time.perf_counter()
+    per_pass = []
+    for p in range(settings.passes):
+        total = None
+        for c, chunk_spp in enumerate(chunks):
+            seed_value = (settings.seed * settings.passes + p) * len(chunks) + c
+            image = integrator.render_orders(sensor, seed=seed_value, spp=chunk_spp).numpy()
+            total = image * chunk_spp if total is None else total + image * chunk_spp
+            if bar is not None:
+                bar.update(chunk_spp)
+        per_pass.append(total / spp_per_pass)
+    elapsed = time.perf_counter() - start
+    if bar is not None:
+        bar.close()
+
+    per_pass = np.stack(per_pass)                     # (P, H, W, orders, N)
+    orders_mean = per_pass.mean(axis=0)
+    radiance_passes = per_pass.sum(axis=3)            # (P, H, W, N)
+    radiance = radiance_passes.mean(axis=0)
+    standard_error = radiance_passes.std(axis=0, ddof=1) / math.sqrt(settings.passes)
+    samples = camera.width * camera.height * spp_per_pass * settings.passes
+    import skyref
+
+    metadata = {"skyref_version": skyref.__version__, "integrator": "atmosphere", "variant": mi.variant(),
+                "geometry": geometry, "spp": spp_per_pass * settings.passes, "passes": settings.passes,
+                "seed": settings.seed, "wavelengths_per_path": integrator.channels,
+                "render_time_s": elapsed, "samples_per_second": samples / elapsed}
+    return Sky(radiance=radiance.astype(np.float32), standard_error=standard_error.astype(np.float32),
+               wavelengths_nm=np.asarray(scene.wavelengths_nm, dtype=np.float64),
+               directions=pixel_directions(camera),
+               orders={name: orders_mean[..., i, :].astype(np.float32) for i, name in enumerate(ORDER_NAMES)},
+               scene=scene, metadata=metadata)
