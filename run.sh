@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # skyref's one entry point on a fresh Debian 12 machine (as root):
 #   bash run.sh demo   set everything up, then render the default scene (scenes/earth-clear.toml)
+#                      to out/earth-clear.exr and out/earth-clear.png
 #   bash run.sh test   set everything up, then run the test suite (what CI runs)
 #   bash run.sh setup  only set up
 # Set-up is idempotent: system packages are installed only when missing, the virtual
@@ -44,8 +45,7 @@ case "${1:-}" in
     setup) setup ;;
     demo)
         setup
-        "$VENV/bin/skyref" info
-        "$VENV/bin/skyref" validate scenes/earth-clear.toml
+        "$VENV/bin/skyref" render scenes/earth-clear.toml -o out/earth-clear.exr --png out/earth-clear.png
         ;;
     test)
         setup

@@ -75,6 +75,44 @@ def cmd_info(args) -> int:
     return 0
 
 
+def _check_output(path: str, suffix: str, option: str) -> None:
+    """Fail before any work if ``path`` has the wrong extension or cannot be written."""
+    import os
+
+    if not path.lower().endswith(suffix):
+        raise ParameterError(option, path, f"a file name ending in {suffix}", "wrong extension")
+    directory = os.path.dirname(os.path.abspath(path))
+    probe = directory
+    while not os.path.exists(probe):
+        probe = os.path.dirname(probe)
+    if not os.access(probe, os.W_OK):
+        raise ParameterError(option, path, "a path in a writable directory", "not writable")
+
+
+def cmd_render(args) -> int:
+    from skyref.io.exr import write_sky_exr
+    from skyref.io.png import write_png
+    from skyref.render import render_sky
+    from skyref.scene import load_scene
+
+    _check_output(args.output, ".exr", "--output")
+    if args.png:
+        _check_output(args.png, ".png", "--png")
+    scene = load_scene(args.scene)
+    sky = render_sky(scene, spp=args.spp, passes=args.passes, seed=args.seed, variant=args.variant,
+                     geometry=args.geometry, progress=not args.quiet)
+    write_sky_exr(sky, args.output)
+    if args.png:
+        write_png(sky, args.png)
+    meta = sky.metadata
+    visible = sky.radiance > 0
+    error = float(np.median(sky.standard_error[visible] / sky.radiance[visible])) if visible.any() else float("nan")
+    print(f"{args.output}: {sky.shape[1]}x{sky.shape[0]} px, {sky.shape[2]} wavelengths, {meta['spp']} spp "
+          f"in {meta['render_time_s']:.1f} s ({meta['samples_per_second'] / 1e6:.2f} M samples/s), "
+          f"median relative standard error {100 * error:.1f}%")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="skyref", description="Reference skies: a spectral path tracer "
                                      "for planetary atmospheres and the tools that use it as ground truth.")
@@ -84,6 +122,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scenes", nargs="+", metavar="SCENE", help="scene TOML file(s)")
     p.add_argument("-q", "--quiet", action="store_true", help="print only whether each scene is valid")
     p.set_defaults(run=cmd_validate)
+
+    p = sub.add_parser("render", help="render a scene to a spectral EXR (and a PNG preview)")
+    p.add_argument("scene", metavar="SCENE", help="scene TOML file")
+    p.add_argument("-o", "--output", required=True, help="spectral EXR to write")
+    p.add_argument("--png", help="also write a tone-mapped sRGB PNG preview")
+    p.add_argument("--spp", type=int, help="samples per pixel (default: the scene's)")
+    p.add_argument("--passes", type=int, help="independent passes for the standard error (default: the scene's)")
+    p.add_argument("--seed", type=int, help="random seed (default: the scene's)")
+    p.add_argument("--variant", help="Mitsuba variant (default: cuda_ad_rgb with a GPU, else llvm_ad_rgb)")
+    p.add_argument("--geometry", default="spherical", choices=("spherical", "plane_parallel"),
+                   help="planet geometry (plane_parallel is for comparisons with DISORT)")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(run=cmd_render)
 
     p = sub.add_parser("info", help="versions, libLLVM, Mitsuba variants, presets")
     p.set_defaults(run=cmd_info)
