@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from skyref.atmosphere import Atmosphere, from_turbidity, preset, wavelength_grid
-from skyref.atmosphere.validation import check_choice, check_number
+from skyref.atmosphere.validation import check_choice, check_fields, check_number
 from skyref.errors import ParameterError
 
 #: Bruneton 2017's solar angular radius, 0.00935 / 2 rad, in degrees.
@@ -33,15 +33,6 @@ def direction_from_angles(zenith_deg, azimuth_deg) -> np.ndarray:
     theta = np.radians(zenith_deg)
     phi = np.radians(azimuth_deg)
     return np.stack([np.sin(theta) * np.sin(phi), np.sin(theta) * np.cos(phi), np.cos(theta)], axis=-1)
-
-
-def _fields_from(cls, data: dict, section: str) -> dict:
-    allowed = [f.name for f in dataclasses.fields(cls) if f.init]
-    for key in data:
-        if key not in allowed:
-            raise ParameterError(f"{section}.{key}", data[key], "one of " + ", ".join(allowed),
-                                 "unknown parameter")
-    return dict(data)
 
 
 @dataclass(frozen=True)
@@ -109,7 +100,7 @@ class Sun:
 
     @classmethod
     def from_dict(cls, data: dict) -> "Sun":
-        fields = _fields_from(cls, data, "sun")
+        fields = check_fields("sun", dict(data), cls)
         if "time" in fields:
             for key in ("zenith_deg", "azimuth_deg"):
                 if key in fields:
@@ -137,7 +128,7 @@ class Observer:
 
     @classmethod
     def from_dict(cls, data: dict) -> "Observer":
-        return cls(**_fields_from(cls, data, "observer"))
+        return cls(**check_fields("observer", dict(data), cls))
 
 
 CAMERA_TYPES = ("equirectangular", "fisheye", "perspective")
@@ -173,7 +164,7 @@ class Camera:
 
     @classmethod
     def from_dict(cls, data: dict) -> "Camera":
-        return cls(**_fields_from(cls, data, "camera"))
+        return cls(**check_fields("camera", dict(data), cls))
 
 
 @dataclass(frozen=True)
@@ -198,7 +189,7 @@ class RenderSettings:
 
     @classmethod
     def from_dict(cls, data: dict) -> "RenderSettings":
-        return cls(**_fields_from(cls, data, "render"))
+        return cls(**check_fields("render", dict(data), cls))
 
 
 @dataclass(frozen=True)
