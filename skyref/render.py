@@ -89,6 +89,9 @@ def render_sky(scene, spp: int | None = None, passes: int | None = None, seed: i
     mi = load_mitsuba(variant)
     integrator = build_integrator(scene.replace(render=settings), geometry, wavelengths_per_path)
     sensor = mi.load_dict(sensor_dict(scene.camera))
+    if scene.objects:
+        integrator.objects = mi.load_dict({"type": "scene", **{f"object_{i}": item.mitsuba_dict()
+                                                               for i, item in enumerate(scene.objects)}})
     camera = scene.camera
     chunks = _chunks(spp_per_pass, camera.width * camera.height)
 

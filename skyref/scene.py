@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from skyref.atmosphere import Atmosphere, from_turbidity, preset, wavelength_grid
-from skyref.atmosphere.validation import check_choice, check_fields, check_number
+from skyref.atmosphere.validation import check_array, check_choice, check_fields, check_number
 from skyref.errors import ParameterError
 
 #: Bruneton 2017's solar angular radius, 0.00935 / 2 rad, in degrees.
@@ -192,6 +192,59 @@ class RenderSettings:
         return cls(**check_fields("render", dict(data), cls))
 
 
+OBJECT_TYPES = ("obj", "ply", "sphere", "rectangle", "cube", "disk", "cylinder")
+
+
+@dataclass(frozen=True)
+class SceneObject:
+    """A Lambertian object standing in the atmosphere (terrain, a building, a test target):
+    a Mitsuba shape of ``type`` (``filename`` for meshes), scaled by ``scale_m`` and moved by
+    ``translate_m`` in the observer's east-north-up frame (metres; the ground under the
+    observer is at z = -altitude). ``albedo`` is its grey Lambertian reflectance."""
+
+    type: str
+    albedo: float = 0.2
+    filename: str = ""
+    translate_m: tuple = (0.0, 0.0, 0.0)
+    scale_m: tuple = (1.0, 1.0, 1.0)
+
+    def __post_init__(self):
+        check_choice("objects.type", self.type, OBJECT_TYPES)
+        check_number("objects.albedo", self.albedo, 0.0, 1.0)
+        if self.type in ("obj", "ply") and not self.filename:
+            raise ParameterError("objects.filename", self.filename, "a mesh file", "missing")
+        for name in ("translate_m", "scale_m"):
+            value = getattr(self, name)
+            if isinstance(value, (int, float)):
+                value = (value,) * 3
+            object.__setattr__(self, name, tuple(check_array(f"objects.{name}", value, min_length=3)))
+            if len(getattr(self, name)) != 3:
+                raise ParameterError(f"objects.{name}", value, "three numbers (x, y, z)", "wrong length")
+        if min(self.scale_m) <= 0.0:
+            raise ParameterError("objects.scale_m", self.scale_m, "three positive numbers", "not positive")
+
+    def mitsuba_dict(self) -> dict:
+        import mitsuba as mi
+
+        shape = {"type": self.type,
+                 "to_world": mi.ScalarTransform4f().translate(list(self.translate_m)).scale(list(self.scale_m)),
+                 "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [self.albedo] * 3}}}
+        if self.filename:
+            shape["filename"] = self.filename
+        return shape
+
+    def to_dict(self) -> dict:
+        data = dataclasses.asdict(self)
+        data["translate_m"], data["scale_m"] = list(self.translate_m), list(self.scale_m)
+        if not self.filename:
+            del data["filename"]
+        return data
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "SceneObject":
+        return cls(**check_fields("objects", dict(data), cls))
+
+
 @dataclass(frozen=True)
 class Scene:
     atmosphere: Atmosphere = field(default_factory=lambda: preset("bruneton2017"))
@@ -201,12 +254,17 @@ class Scene:
     wavelengths: object = "rgb"
     render: RenderSettings = RenderSettings()
     name: str = ""
+    objects: tuple = ()
 
     def __post_init__(self):
         spec = self.wavelengths
         if isinstance(spec, (list, tuple, np.ndarray)):
             spec = tuple(float(x) for x in spec)
         object.__setattr__(self, "wavelengths", spec)
+        object.__setattr__(self, "objects", tuple(self.objects))
+        for item in self.objects:
+            if not isinstance(item, SceneObject):
+                raise ParameterError("objects", item, "SceneObject entries", "wrong type")
         self.atmosphere.check_wavelengths(self.wavelengths_nm)
 
     @property
@@ -223,11 +281,13 @@ class Scene:
                 "spectral": {"wavelengths": wavelengths}, "render": self.render.to_dict()}
         if self.name:
             data["name"] = self.name
+        if self.objects:
+            data["objects"] = [item.to_dict() for item in self.objects]
         return data
 
     @classmethod
     def from_dict(cls, data: dict) -> "Scene":
-        known = ("name", "atmosphere", "sun", "observer", "camera", "spectral", "render")
+        known = ("name", "atmosphere", "sun", "observer", "camera", "spectral", "render", "objects")
         for key in data:
             if key not in known:
                 raise ParameterError(key, data[key], "top-level tables " + ", ".join(known), "unknown entry")
@@ -242,7 +302,8 @@ class Scene:
                    camera=Camera.from_dict(data.get("camera", {})),
                    wavelengths=wavelengths,
                    render=RenderSettings.from_dict(data.get("render", {})),
-                   name=data.get("name", ""))
+                   name=data.get("name", ""),
+                   objects=tuple(SceneObject.from_dict(item) for item in data.get("objects", [])))
 
 
 def _merge(base: dict, overrides: dict) -> dict:

@@ -63,6 +63,10 @@ MAJORANT_SAFETY = 1.001
 #: ray segment, by raising its majorant where the atmosphere is optically thin.
 CAMERA_COLLISIONS = 1.0
 
+#: Relative offset of a ray leaving an object's surface (x the largest coordinate), against
+#: float32 self-intersection.
+OBJECT_OFFSET = 1.0e-5
+
 #: Russian roulette starts at this scattering order.
 ROULETTE_DEPTH = 3
 
@@ -165,6 +169,9 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
                             math.radians(sun_angular_radius_deg), solar_irradiance(self.wavelengths_nm),
                             limb_darkening)
         self.geometry_name = geometry
+        #: Optional Mitsuba scene whose shapes stand in the atmosphere (terrain, buildings):
+        #: Lambertian, grey albedo = the mean of their BSDF's diffuse reflectance.
+        self.objects = None
 
     # --- Mitsuba plumbing ---------------------------------------------------------------------
 
@@ -254,13 +261,24 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
     # --- the path tracer ------------------------------------------------------------------------
 
     def _segment(self, p, d, h):
-        """Distance to the end of the free segment from p along d, whether it ends on the
-        ground, and the altitude at its end."""
+        """Where the free segment from p along d ends: its length, whether it ends on a surface
+        (the ground or an object), the altitude at its end (exact for the ground and the top),
+        and, for an object, its normal (facing the ray) and grey albedo."""
         geometry = self.geometry
         t_ground = geometry.distance_to_ground(p, d, h)
         t_top = geometry.distance_to_top(p, d, h)
-        hits_ground = t_ground < t_top
-        return dr.select(hits_ground, t_ground, t_top), hits_ground, dr.select(hits_ground, 0.0, geometry.H)
+        on_ground = t_ground < t_top
+        length = dr.select(on_ground, t_ground, t_top)
+        h_end = dr.select(on_ground, 0.0, geometry.H)
+        if dr.hint(self.objects is None, mode="scalar"):
+            return length, on_ground, h_end, mi.Bool(False), mi.Vector3f(0.0), mi.Float(0.0)
+        si = self.objects.ray_intersect(mi.Ray3f(p, d, length))
+        on_object = si.is_valid() & (si.t < length)
+        normal = dr.select(dr.dot(si.n, d) > 0.0, -si.n, si.n)
+        albedo = dr.mean(mi.Spectrum(si.bsdf().eval_diffuse_reflectance(si, on_object)), axis=0)
+        length = dr.select(on_object, si.t, length)
+        h_end = dr.select(on_object, geometry.altitude(p + length * d), h_end)
+        return length, on_ground | on_object, h_end, on_object, normal, albedo
 
     def _majorant(self, channels, p, d, length, h, h_end):
         h_low = self.geometry.lowest_altitude(p, d, length, h, h_end)
@@ -298,7 +316,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         throughput = channels.zeros() + 1.0
         alive = mi.Bool(active) & ~misses
         depth = mi.UInt32(0)
-        remaining, hits_ground, h_end = self._segment(p, d, h)
+        remaining, hits_surface, h_end, hits_object, object_normal, object_albedo = self._segment(p, d, h)
 
         # -- the shadow ray in flight (one at a time per lane) ----------------------------------
         in_shadow = mi.Bool(False)
@@ -367,17 +385,23 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             # -- path: the segment ends on the ground (a Lambertian vertex) or in space -----------
             p = dr.select(reaches_end, p + remaining * d, p)
             h = dr.select(reaches_end, h_end, h)
-            on_ground = reaches_end & hits_ground
-            escapes = reaches_end & ~hits_ground
+            on_ground = reaches_end & hits_surface
+            escapes = reaches_end & ~hits_surface
             direct = dr.select(escapes & (depth == 0), direct + throughput * e_sun
                                * (sun.radiance_factor(dr.dot(d, sun.direction)) / sun.solid_angle), direct)
             alive &= ~escapes
-            up = geometry.up(p)
-            reflected_sunlight = throughput * channels.albedo * (dr.maximum(dr.dot(up, sun_direction), 0.0) / math.pi)
+            # A surface vertex: the planet's ground, or an object (normal offset: no self-hits).
+            on_object = on_ground & hits_object
+            up = dr.select(on_object, object_normal, geometry.up(p))
+            p = dr.select(on_object, p + up * (OBJECT_OFFSET * (1.0 + dr.max(dr.abs(p)))), p)
+            albedo = dr.select(on_object, channels.zeros() + object_albedo, channels.albedo)
+            reflected_sunlight = throughput * albedo * (dr.maximum(dr.dot(up, sun_direction), 0.0) / math.pi)
 
             # -- start the shadow ray of this step's next-event estimate -----------------------------
             estimate = collides | on_ground
             visible = estimate & (geometry.distance_to_ground(p, sun_direction, h) == dr.inf)
+            if dr.hint(self.objects is not None, mode="scalar"):
+                visible &= ~self.objects.ray_test(mi.Ray3f(p, sun_direction), visible)
             in_shadow |= visible
             q = dr.select(visible, p, q)
             hq = dr.select(visible, h, hq)
@@ -397,12 +421,15 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             d_air = direction_with_cosine(d, mu, u_direction.y)
             d_ground = mi.Frame3f(up).to_world(mi.warp.square_to_cosine_hemisphere(u_direction))
             throughput = dr.select(scatters, throughput * optics.phase(parts, sigma_s, mu) / pdf, throughput)
-            throughput = dr.select(on_ground, throughput * channels.albedo, throughput)
+            throughput = dr.select(on_ground, throughput * albedo, throughput)
             d = dr.select(scatters, d_air, dr.select(on_ground, d_ground, d))
-            new_remaining, new_hits_ground, new_h_end = self._segment(p, d, h)
-            remaining = dr.select(vertex, new_remaining, remaining)
-            hits_ground = dr.select(vertex, new_hits_ground, hits_ground)
-            h_end = dr.select(vertex, new_h_end, h_end)
+            segment = self._segment(p, d, h)
+            remaining = dr.select(vertex, segment[0], remaining)
+            hits_surface = dr.select(vertex, segment[1], hits_surface)
+            h_end = dr.select(vertex, segment[2], h_end)
+            hits_object = dr.select(vertex, segment[3], hits_object)
+            object_normal = dr.select(vertex, segment[4], object_normal)
+            object_albedo = dr.select(vertex, segment[5], object_albedo)
 
             # -- Russian roulette and termination ------------------------------------------------
             survival = dr.minimum(dr.max(dr.detach(throughput), axis=0), 0.95)
