@@ -24,6 +24,15 @@ _DISPLAY_VALUE = 0.8
 
 
 @functools.lru_cache(maxsize=1)
+def _srgb() -> colour.RGB_Colourspace:
+    # Matrices derived from the primaries and D65 white: exact inverses of each other, where
+    # colour's defaults are the rounded IEC 61966-2-1 matrices (which disagree at 1e-4).
+    colourspace = colour.RGB_COLOURSPACES["sRGB"].copy()
+    colourspace.use_derived_transformation_matrices(True)
+    return colourspace
+
+
+@functools.lru_cache(maxsize=1)
 def _cmfs() -> tuple[np.ndarray, np.ndarray]:
     cmfs = colour.MSDS_CMFS[_CMFS_NAME]
     return np.asarray(cmfs.wavelengths, dtype=np.float64), np.asarray(cmfs.values, dtype=np.float64)
@@ -83,14 +92,15 @@ def xyz_to_linear_srgb(xyz) -> np.ndarray:
     """Linear sRGB of absolute XYZ ``(..., 3)``, on the same scale (R = G = B = Y for D65 white).
 
     No chromatic adaptation: XYZ here is the radiometric colour of the scene and sRGB's own
-    white is D65, so the plain XYZ -> RGB matrix applies.
+    white is D65, so the plain XYZ -> RGB matrix applies (derived from sRGB's primaries and
+    white point rather than the rounded matrix of the standard).
     """
-    return colour.XYZ_to_RGB(np.asarray(xyz, dtype=np.float64), "sRGB", chromatic_adaptation_transform=None)
+    return colour.XYZ_to_RGB(np.asarray(xyz, dtype=np.float64), _srgb(), chromatic_adaptation_transform=None)
 
 
 def linear_srgb_to_xyz(rgb) -> np.ndarray:
     """Absolute XYZ of linear sRGB ``(..., 3)``; inverse of :func:`xyz_to_linear_srgb`."""
-    return colour.RGB_to_XYZ(np.asarray(rgb, dtype=np.float64), "sRGB", chromatic_adaptation_transform=None)
+    return colour.RGB_to_XYZ(np.asarray(rgb, dtype=np.float64), _srgb(), chromatic_adaptation_transform=None)
 
 
 def spectral_to_linear_srgb(radiance, wavelengths_nm) -> np.ndarray:
@@ -100,7 +110,7 @@ def spectral_to_linear_srgb(radiance, wavelengths_nm) -> np.ndarray:
 
 def srgb_luminance(rgb) -> np.ndarray:
     """Luminance of linear sRGB ``(..., 3)`` (the Y row of sRGB -> XYZ), same scale."""
-    return np.asarray(rgb, dtype=np.float64) @ np.asarray(colour.RGB_COLOURSPACES["sRGB"].matrix_RGB_to_XYZ)[1]
+    return np.asarray(rgb, dtype=np.float64) @ np.asarray(_srgb().matrix_RGB_to_XYZ)[1]
 
 
 def default_exposure(linear_rgb) -> float:
@@ -146,7 +156,7 @@ def ciede2000(rgb_a, rgb_b, white_luminance: float | None = None) -> np.ndarray:
         luminance = np.concatenate([xyz_a[..., 1].ravel(), xyz_b[..., 1].ravel()])
         luminance = luminance[np.isfinite(luminance)]
         white_luminance = float(luminance.max()) if luminance.size and luminance.max() > 0 else 1.0
-    white = colour.RGB_COLOURSPACES["sRGB"].whitepoint
+    white = _srgb().whitepoint
     lab_a = colour.XYZ_to_Lab(xyz_a / white_luminance, white)
     lab_b = colour.XYZ_to_Lab(xyz_b / white_luminance, white)
     return np.asarray(colour.delta_E(lab_a, lab_b, method="CIE 2000"))

@@ -1,8 +1,6 @@
 """The Mitsuba equirectangular and fisheye sensors: rays against skyref.projection, renders of a
 constant environment against the constant."""
 
-import math
-
 import numpy as np
 import pytest
 
@@ -11,7 +9,6 @@ from skyref.scene import Camera
 
 _llvm.configure_libllvm()
 mi = pytest.importorskip("mitsuba")
-import drjit as dr  # noqa: E402
 
 VARIANTS = ["llvm_ad_rgb", "llvm_ad_spectral"]
 ORIGIN = [10.0, -20.0, 30.0]
@@ -48,9 +45,9 @@ def pixel_centre_rays(sensor, width, height):
     ray, weight = sensor.sample_ray(time=0.0, sample1=mi.Float(np.linspace(0.01, 0.99, u.size)),
                                     sample2=mi.Point2f(u, v), sample3=mi.Point2f(0.5, 0.5), active=True)
     direction = np.array(ray.d).T.reshape(height, width, 3)
-    origin = np.array(ray.o).T.reshape(height, width, 3)
-    weight = np.array(weight)
-    weight = weight.reshape(-1, height, width) if weight.ndim == 2 else weight.reshape(1, height, width)
+    origin = np.array(ray.o).T.reshape(-1, 3)                      # may be one broadcast origin
+    weight = np.array(weight)                                      # (channels, 1 or n)
+    weight = np.broadcast_to(weight, (weight.shape[0], u.size)).reshape(-1, height, width)
     return direction, origin, weight
 
 
@@ -134,4 +131,3 @@ def test_bbox_is_the_origin(variant):
     sensor = mi.load_dict(sensor_dict(Camera("fisheye", width=4, height=4)))
     bbox = sensor.bbox()
     assert np.allclose(np.array(bbox.min), ORIGIN) and np.allclose(np.array(bbox.max), ORIGIN)
-    assert math.isfinite(float(dr.norm(mi.ScalarVector3f(bbox.min))))

@@ -133,8 +133,8 @@ def read_sky_exr(path) -> Sky:
         raise ParameterError("path", path, "an existing OpenEXR file", "file not found")
     try:
         with OpenEXR.File(path, separate_channels=True) as exr:
-            header = exr.header()
-            pixels = {name: channel.pixels for name, channel in exr.channels().items()}
+            header = dict(exr.header())
+            pixels = {name: np.array(channel.pixels, dtype=np.float32) for name, channel in exr.channels().items()}
     except (RuntimeError, OSError, ValueError) as exc:
         raise ParameterError("path", path, "a readable OpenEXR file", f"unreadable: {exc}") from None
 
@@ -165,7 +165,7 @@ def read_sky_exr(path) -> Sky:
         if set(names) != set(wavelengths):
             raise ParameterError("path", path, "the same wavelengths in every layer",
                                  f"layer {layer!r} has {sorted(names)}")
-        return np.stack([pixels[names[w]].astype(np.float32) for w in wavelengths], axis=-1)
+        return np.stack([pixels[names[w]] for w in wavelengths], axis=-1)
 
     radiance = stack("")
     standard_error = stack(STDERR_LAYER) if STDERR_LAYER in layers else np.full_like(radiance, np.nan)
