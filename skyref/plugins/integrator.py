@@ -79,6 +79,9 @@ OBJECT_OFFSET = 1.0e-5
 SUN_CONNECTION_BOOST = 8.0
 SUN_CONNECTION_BOOST_DEPTH = 1
 
+#: Shadow rays whose transmittance falls below this (in every channel) play Russian roulette.
+SHADOW_ROULETTE = 0.05
+
 #: Russian roulette starts at this scattering order.
 ROULETTE_DEPTH = 3
 
@@ -366,6 +369,12 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             shadow_step = in_shadow & collides
             transmittance = dr.select(shadow_step, transmittance * dr.maximum(1.0 - sigma_t / majorant, 0.0),
                                       transmittance)
+            # Russian roulette on faint shadow rays (grazing rays at twilight cross tens of
+            # optical depths): continue with probability max T / SHADOW_ROULETTE, reweighted.
+            faint = shadow_step & (dr.max(transmittance, axis=0) < SHADOW_ROULETTE)
+            survival = dr.detach(dr.max(transmittance, axis=0)) / SHADOW_ROULETTE
+            survives = sampler.next_1d() < survival
+            transmittance = dr.select(faint, dr.select(survives, transmittance / survival, 0.0), transmittance)
             q = dr.select(shadow_step, x, q)
             hq = dr.select(shadow_step, hx, hq)
             q_remaining = dr.select(shadow_step, q_remaining - t, q_remaining)

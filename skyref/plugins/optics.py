@@ -240,29 +240,41 @@ class AtmosphereOptics:
                 total = total + part * c.phase(mu)
         return total / dr.maximum(sigma_s, 1e-30)
 
+    def _sampling_mixture(self, sigma_s_parts, sigma_s):
+        """The scattering components and their selection probabilities P_i = mean over
+        channels of sigma_s,i / sigma_s (detached: sampling decisions carry no derivatives)."""
+        comps = [c for c, part in zip(self.components, sigma_s_parts) if part is not None]
+        parts = [part for part in sigma_s_parts if part is not None]
+        if len(comps) < 2:
+            return comps, [mi.Float(1.0)] * len(comps)
+        inv = dr.rcp(dr.maximum(dr.detach(sigma_s), 1e-30))
+        return comps, [dr.mean(dr.detach(part) * inv, axis=0) for part in parts]
+
+    def phase_pdf(self, sigma_s_parts, sigma_s, mu):
+        """Density (sr^-1) with which :meth:`sample_phase` produces the cosine ``mu``: the
+        mixture sum_i P_i pdf_i(mu)."""
+        comps, probabilities = self._sampling_mixture(sigma_s_parts, sigma_s)
+        pdf = mi.Float(0.0) if comps else mi.Float(1.0)
+        for c, prob in zip(comps, probabilities):
+            pdf += prob * c.sampling_pdf(mu)
+        return pdf
+
     def sample_phase(self, sigma_s_parts, sigma_s, u_component, u_mu):
         """Sample a scattering-angle cosine from the mixture of the components' sampling
-        densities, component i chosen with probability P_i = mean over channels of
-        sigma_s,i / sigma_s. Returns (mu, mixture pdf) — one-sample MIS, so the weight
-        phase / pdf stays bounded whichever component produced mu."""
-        comps = [(c, part) for c, part in zip(self.components, sigma_s_parts) if part is not None]
+        densities (component i with probability P_i, see :meth:`phase_pdf`). Returns (mu, pdf)
+        — one-sample MIS, so the weight phase / pdf stays bounded whichever component
+        produced mu."""
+        comps, probabilities = self._sampling_mixture(sigma_s_parts, sigma_s)
         if not comps:  # nothing scatters: never called for a real path, any valid direction will do
             return mi.Float(1.0), mi.Float(1.0)
-        if len(comps) == 1:
-            return comps[0][0].sample_cosine(u_mu)
-        inv = dr.rcp(dr.maximum(dr.detach(sigma_s), 1e-30))
-        probabilities = [dr.mean(dr.detach(part) * inv, axis=0) for _, part in comps]
         # Walk the cumulative probabilities; the last component takes whatever rounding left.
-        mu = comps[-1][0].sample_cosine(u_mu)[0]
+        mu = comps[-1].sample_cosine(u_mu)[0]
         cumulative = mi.Float(0.0)
-        for (c, _), prob in zip(comps[:-1], probabilities[:-1]):
+        for c, prob in zip(comps[:-1], probabilities[:-1]):
             chosen = (u_component >= cumulative) & (u_component < cumulative + prob)
             mu = dr.select(chosen, c.sample_cosine(u_mu)[0], mu)
             cumulative = cumulative + prob
-        pdf = mi.Float(0.0)
-        for (c, _), prob in zip(comps, probabilities):
-            pdf += prob * c.sampling_pdf(mu)
-        return mu, pdf
+        return mu, self.phase_pdf(sigma_s_parts, sigma_s, mu)
 
 
 def direction_with_cosine(d, mu, u_phi):
