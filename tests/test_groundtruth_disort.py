@@ -162,24 +162,6 @@ def reference(case: str, sza: float, observer: str) -> np.ndarray:
 
 # --- the path tracer -----------------------------------------------------------------------------
 
-def _mitsuba():
-    try:
-        from skyref.plugins import load_mitsuba
-
-        return load_mitsuba("llvm_ad_rgb")
-    except ImportError:  # a sibling plugin mid-edit: load only the integrator
-        from skyref._llvm import configure_libllvm
-
-        configure_libllvm()
-        import mitsuba as mi
-
-        if mi.variant() != "llvm_ad_rgb":
-            mi.set_variant("llvm_ad_rgb")
-        import skyref.plugins.integrator  # noqa: F401
-
-        return mi
-
-
 def _sky(integrator, directions, seed, spp) -> np.ndarray:
     """Diffuse sky radiance (orders >= 1) along each row of ``directions``, in chunks."""
     per_call = max(1, MAX_LANES // spp)
@@ -211,7 +193,9 @@ def path_traced(case: str, sza: float, observer: str, target: float) -> dict:
     and sizes the main run; the main run's batch spread then tops up the directions whose
     standard error came out above TOPUP_AT x target (heavy-tailed paths, e.g. the forward peak,
     make the pilot underestimate), with BATCHES more batches combined batch by batch."""
-    _mitsuba()
+    from skyref.plugins import load_mitsuba
+
+    load_mitsuba("llvm_ad_rgb")
     from skyref.render import build_integrator
     from skyref.scene import Observer, Scene, Sun, direction_from_angles
 

@@ -2,7 +2,6 @@
 and occlusion of the sun."""
 
 import numpy as np
-import pytest
 
 import skyref.atmosphere as A
 from skyref.plugins import load_mitsuba

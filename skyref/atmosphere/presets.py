@@ -7,8 +7,6 @@ height, ozone as a 10–25–40 km tent.
 
 from __future__ import annotations
 
-import math
-
 from skyref.atmosphere.constituents import Absorber, Aerosol, Rayleigh
 from skyref.atmosphere.model import Atmosphere
 from skyref.atmosphere.phase import CornetteShanks

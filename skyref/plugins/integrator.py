@@ -422,6 +422,8 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
 
             # -- start the shadow ray of this step's next-event estimate -----------------------------
             estimate = candidate | on_ground
+            sunlight = dr.select(on_ground, reflected_sunlight, scattered_sunlight) * e_sun * sun_factor
+            estimate &= dr.max(dr.detach(sunlight), axis=0) > 0.0   # nothing to connect: no shadow ray
             visible = estimate & (geometry.distance_to_ground(p, sun_direction, h) == dr.inf)
             if dr.hint(self.objects is not None, mode="scalar"):
                 visible &= ~self.objects.ray_test(mi.Ray3f(p, sun_direction), visible)
@@ -431,8 +433,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             omega = dr.select(visible, sun_direction, omega)
             q_remaining = dr.select(visible, geometry.distance_to_top(p, sun_direction, h), q_remaining)
             transmittance = dr.select(visible, 1.0, transmittance)
-            pending = dr.select(visible, dr.select(on_ground, reflected_sunlight, scattered_sunlight)
-                                * e_sun * sun_factor, pending)
+            pending = dr.select(visible, sunlight, pending)
             pending_order = dr.select(visible, depth + 1, pending_order)
             vertex = scatters | on_ground
             depth = dr.select(vertex, depth + 1, depth)
