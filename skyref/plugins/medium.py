@@ -73,7 +73,8 @@ import numpy as np
 from skyref.atmosphere import RGB_WAVELENGTHS_NM, Atmosphere, preset
 from skyref.plugins.geometry import SphericalShell
 from skyref.plugins.optics import AtmosphereOptics
-from skyref.plugins.phase import ChannelMap, bind_to_variant, is_atmosphere_phase, phase_class
+from skyref.plugins.phase import ChannelMap, is_atmosphere_phase, phase_class
+from skyref.plugins.variant_class import variant_class
 
 #: Name under which the medium is registered (see the module docstring).
 PLUGIN_NAME = "atmosphere_medium"
@@ -255,15 +256,9 @@ class AtmosphereMediumMethods:
                 f"wavelengths={len(self.wavelengths_nm)}]")
 
 
-_CLASSES = {}
-
-
 def medium_class():
-    """The ``atmosphere_medium`` class of the current Mitsuba variant (created once per variant)."""
-    variant = mi.variant()
-    if variant not in _CLASSES:
-        _CLASSES[variant] = bind_to_variant(AtmosphereMediumMethods, "AtmosphereMedium", mi.Medium)
-    return _CLASSES[variant]
+    """The ``atmosphere_medium`` class of the current Mitsuba variant."""
+    return variant_class(AtmosphereMediumMethods, "AtmosphereMedium", "Medium")
 
 
 def __getattr__(name):

@@ -38,6 +38,7 @@ import numpy as np
 
 from skyref.errors import ParameterError
 from skyref.plugins.optics import direction_with_cosine
+from skyref.plugins.variant_class import is_instance, variant_class
 
 
 class ChannelMap:
@@ -155,30 +156,14 @@ class AtmospherePhaseMethods:
         return f"AtmospherePhase[atmosphere={name!r}]"
 
 
-def bind_to_variant(methods, name, base):
-    """A class called ``name`` deriving from ``base`` (a Mitsuba class of the current variant)
-    with the methods of ``methods``. nanobind classes take a single base, so the methods are
-    copied; they reach the base through ``self._mitsuba_base`` instead of ``super()``."""
-    namespace = {k: v for k, v in vars(methods).items() if k not in ("__dict__", "__weakref__")}
-    namespace["_mitsuba_base"] = base
-    namespace["__module__"] = methods.__module__
-    return type(name, (base,), namespace)
-
-
-_CLASSES = {}
-
-
 def is_atmosphere_phase(obj) -> bool:
     """Whether ``obj`` is an ``atmosphere_phase`` instance (of any variant)."""
-    return isinstance(obj, tuple(_CLASSES.values()))
+    return is_instance(obj, "AtmospherePhase")
 
 
 def phase_class():
-    """The ``atmosphere_phase`` class of the current Mitsuba variant (created once per variant)."""
-    variant = mi.variant()
-    if variant not in _CLASSES:
-        _CLASSES[variant] = bind_to_variant(AtmospherePhaseMethods, "AtmospherePhase", mi.PhaseFunction)
-    return _CLASSES[variant]
+    """The ``atmosphere_phase`` class of the current Mitsuba variant."""
+    return variant_class(AtmospherePhaseMethods, "AtmospherePhase", "PhaseFunction")
 
 
 def __getattr__(name):

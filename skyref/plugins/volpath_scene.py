@@ -40,7 +40,7 @@ import numpy as np
 from skyref.atmosphere import ConstantSpectrum, solar_irradiance
 from skyref.errors import ParameterError
 from skyref.plugins.medium import atmosphere_from_property, default_wavelengths
-from skyref.plugins.phase import bind_to_variant
+from skyref.plugins.variant_class import variant_class
 
 #: Height of the sensor above the ground when the observer stands on it, m (see module notes).
 GROUND_CLEARANCE_M = 1.0
@@ -168,12 +168,6 @@ class DirectionsSensorMethods:
         return f"DirectionsSensor[{self.count} directions]"
 
 
-_CLASSES = {}
-
-
 def directions_sensor_class():
     """The ``skyref_directions`` class of the current Mitsuba variant."""
-    variant = mi.variant()
-    if variant not in _CLASSES:
-        _CLASSES[variant] = bind_to_variant(DirectionsSensorMethods, "DirectionsSensor", mi.Sensor)
-    return _CLASSES[variant]
+    return variant_class(DirectionsSensorMethods, "DirectionsSensor", "Sensor")
