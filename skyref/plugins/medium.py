@@ -219,11 +219,10 @@ class AtmosphereMediumMethods:
         the distance to the planet's centre is convex along a line, so the lowest altitude is at
         the closest approach clamped to the segment and the highest at an end."""
         geometry = self.geometry
-        radial = dr.dot(o, d) + geometry.centre_distance * d.z
-        t_low = dr.clip(-radial, t0, t1)
-        h_start = geometry.altitude(o + t0 * d)
+        start = o + t0 * d
+        h_start = geometry.altitude(start)
         h_end = geometry.altitude(o + t1 * d)
-        h_low = dr.minimum(geometry.altitude(o + t_low * d), dr.minimum(h_start, h_end))
+        h_low = geometry.lowest_altitude(start, d, t1 - t0, h_start, h_end)
         h_high = dr.maximum(h_start, h_end)
         h_low = dr.clip(h_low, 0.0, geometry.H)
         h_high = dr.clip(h_high, h_low, geometry.H)
