@@ -76,17 +76,21 @@ def cmd_info(args) -> int:
 
 
 def _check_output(path: str, suffix: str, option: str) -> None:
-    """Fail before any work if ``path`` has the wrong extension or cannot be written."""
+    """Fail before any work if ``path`` has the wrong extension or its directory cannot be
+    created or written (probed with a temporary file that is removed again)."""
     import os
+    import tempfile
 
     if not path.lower().endswith(suffix):
         raise ParameterError(option, path, f"a file name ending in {suffix}", "wrong extension")
     directory = os.path.dirname(os.path.abspath(path))
-    probe = directory
-    while not os.path.exists(probe):
-        probe = os.path.dirname(probe)
-    if not os.access(probe, os.W_OK):
-        raise ParameterError(option, path, "a path in a writable directory", "not writable")
+    try:
+        os.makedirs(directory, exist_ok=True)
+        with tempfile.TemporaryFile(dir=directory):
+            pass
+    except OSError as exc:
+        raise ParameterError(option, path, "a path in a writable directory",
+                             f"cannot write there ({exc.strerror})") from None
 
 
 def cmd_render(args) -> int:

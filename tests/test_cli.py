@@ -6,6 +6,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from skyref import _llvm
@@ -134,3 +135,31 @@ def test_no_command_is_a_usage_error(capsys):
     with pytest.raises(SystemExit) as info:
         main([])
     assert info.value.code == 2
+
+
+# --- render: bad input is refused before any work ------------------------------------------------
+
+@pytest.mark.parametrize("args, name", [
+    (["-o", "sky.png"], "--output"),                       # wrong extension
+    (["-o", "/proc/no/such/dir/sky.exr"], "--output"),     # cannot be created
+    (["-o", "{tmp}/sky.exr", "--png", "{tmp}/sky.jpg"], "--png"),
+    (["-o", "{tmp}/sky.exr", "--spp", "0"], "render.spp"),
+    (["-o", "{tmp}/sky.exr", "--variant", "no_such_variant"], "variant"),
+])
+def test_render_refuses_bad_input(args, name, tmp_path, capsys):
+    args = [a.replace("{tmp}", str(tmp_path)) for a in args]
+    assert main(["render", str(EARTH_CLEAR), *args]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"skyref render: error: {name} = ")
+    assert not list(tmp_path.glob("*.exr")) and not list(tmp_path.glob("*.tmp*"))
+
+
+def test_render_writes_exr_and_png(tmp_path, capsys):
+    from skyref.io.exr import read_sky_exr
+
+    scene = write(tmp_path, '[camera]\nwidth = 16\nheight = 8\n[render]\nspp = 4\npasses = 2\n')
+    assert main(["render", str(scene), "-o", str(tmp_path / "sky.exr"), "--png", str(tmp_path / "sky.png"), "-q"]) == 0
+    sky = read_sky_exr(tmp_path / "sky.exr")
+    assert sky.radiance.shape == (8, 16, 3) and np.all(np.isfinite(sky.radiance))
+    assert (tmp_path / "sky.png").stat().st_size > 0
+    assert "median relative standard error" in capsys.readouterr().out

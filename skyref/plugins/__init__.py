@@ -30,7 +30,11 @@ def load_mitsuba(variant: str | None = None):
 
     from skyref.atmosphere.validation import check_choice
 
-    supported = [v for v in mi.variants() if v.split("_", 2)[-1] in ("rgb", "spectral") and "_ad_" in v]
+    import drjit as dr
+
+    backends = {"llvm": dr.JitBackend.LLVM, "cuda": dr.JitBackend.CUDA}
+    supported = [v for v in mi.variants() if v.split("_", 2)[-1] in ("rgb", "spectral") and "_ad_" in v
+                 and dr.has_backend(backends[v.split("_", 1)[0]])]
     variant = check_choice("variant", variant or default_variant(), supported)
     if mi.variant() != variant:
         mi.set_variant(variant)
