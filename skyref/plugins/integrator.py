@@ -45,16 +45,16 @@ the derivatives of the radiance.
 
 from __future__ import annotations
 
-import json
 import math
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from skyref.atmosphere import Atmosphere, preset, solar_irradiance
+from skyref.atmosphere import solar_irradiance
 from skyref.plugins.geometry import PlaneParallelSlab, SphericalShell
-from skyref.plugins.optics import AtmosphereOptics, direction_with_cosine
+from skyref.plugins.optics import AtmosphereOptics, atmosphere_from_property, direction_with_cosine
+from skyref.scene import SUN_ANGULAR_RADIUS_DEG, direction_from_angles
 from skyref.sky import ORDER_NAMES
 
 #: Limb-darkening coefficient u of the linear law I(mu)/I(1) = 1 - u (1 - mu), grey (a visible
@@ -138,16 +138,14 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
 
     def __init__(self, props=mi.Properties()):
         super().__init__(props)
-        text = props.get("atmosphere", "bruneton2017")
-        atmosphere = (Atmosphere.from_dict(json.loads(text)) if text.lstrip().startswith("{")
-                      else preset(text))
+        atmosphere = atmosphere_from_property(props.get("atmosphere", "bruneton2017"))
         wavelengths = props.get("wavelengths", "rgb")
         from skyref.atmosphere import wavelength_grid
 
         grid = wavelength_grid("rgb" if wavelengths == "rgb" else [float(x) for x in wavelengths.split(",")])
         self.configure(atmosphere, grid, sun_zenith_deg=props.get("sun_zenith", 30.0),
                        sun_azimuth_deg=props.get("sun_azimuth", 180.0),
-                       sun_angular_radius_deg=props.get("sun_angular_radius", math.degrees(0.00935 / 2)),
+                       sun_angular_radius_deg=props.get("sun_angular_radius", SUN_ANGULAR_RADIUS_DEG),
                        limb_darkening=props.get("limb_darkening", False),
                        observer_altitude_m=props.get("observer_altitude", 0.0),
                        geometry=props.get("geometry", "spherical"),
@@ -159,7 +157,6 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
                   geometry="spherical", max_depth=64, wavelengths_per_path=0):
         """Set the atmosphere, wavelength grid (nm), sun, observer and estimator settings."""
         from skyref.atmosphere.validation import check_choice, check_number
-        from skyref.scene import direction_from_angles
 
         check_choice("geometry", geometry, ("spherical", "plane_parallel"))
         self.optics = AtmosphereOptics(atmosphere, wavelengths_nm)
@@ -180,7 +177,6 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         self.sun = SunLight(direction_from_angles(sun_zenith_deg, sun_azimuth_deg),
                             math.radians(sun_angular_radius_deg), solar_irradiance(self.wavelengths_nm),
                             limb_darkening)
-        self.geometry_name = geometry
         #: Optional Mitsuba scene whose shapes stand in the atmosphere (terrain, buildings):
         #: Lambertian, grey albedo = the mean of their BSDF's diffuse reflectance.
         self.objects = None

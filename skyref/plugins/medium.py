@@ -64,15 +64,13 @@ Differentiable parameters (``mi.traverse``): those of ``AtmosphereOptics.paramet
 
 from __future__ import annotations
 
-import json
-
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from skyref.atmosphere import RGB_WAVELENGTHS_NM, Atmosphere, preset
+from skyref.atmosphere import RGB_WAVELENGTHS_NM
 from skyref.plugins.geometry import SphericalShell
-from skyref.plugins.optics import AtmosphereOptics
+from skyref.plugins.optics import AtmosphereOptics, atmosphere_from_property
 from skyref.plugins.phase import ChannelMap, is_atmosphere_phase, phase_class
 from skyref.plugins.variant_class import variant_class
 
@@ -93,16 +91,6 @@ def default_wavelengths() -> np.ndarray:
         start, stop, step = SPECTRAL_GRID_NM
         return np.arange(start, stop + 0.5 * step, step)
     return np.asarray(RGB_WAVELENGTHS_NM, dtype=np.float64)
-
-
-def atmosphere_from_property(value) -> Atmosphere:
-    """An Atmosphere from a preset name, its JSON, an Atmosphere or a dict."""
-    if isinstance(value, Atmosphere):
-        return value
-    if isinstance(value, dict):
-        return Atmosphere.from_dict(value)
-    text = str(value)
-    return Atmosphere.from_dict(json.loads(text)) if text.lstrip().startswith("{") else preset(text)
 
 
 class AtmosphereMediumMethods:

@@ -23,16 +23,28 @@ wavelength grid, and a path carries K channels as an ``ArrayXf``.
 
 from __future__ import annotations
 
+import json
 import math
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from skyref.atmosphere import Atmosphere, preset
 from skyref.atmosphere import phase as phase_model
 from skyref.atmosphere.constituents import angstrom_extinction
 from skyref.atmosphere.spectra import DOBSON_UNIT_PER_M2, ConstantSpectrum
 from skyref.plugins.drjit_namespace import xp
+
+
+def atmosphere_from_property(value) -> "Atmosphere":
+    """An Atmosphere from a preset name, its JSON, an Atmosphere or a dict."""
+    if isinstance(value, Atmosphere):
+        return value
+    if isinstance(value, dict):
+        return Atmosphere.from_dict(value)
+    text = str(value)
+    return Atmosphere.from_dict(json.loads(text)) if text.lstrip().startswith("{") else preset(text)
 
 
 def _opaque(value) -> mi.Float:

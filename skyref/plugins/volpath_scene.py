@@ -39,7 +39,8 @@ import numpy as np
 
 from skyref.atmosphere import ConstantSpectrum, solar_irradiance
 from skyref.errors import ParameterError
-from skyref.plugins.medium import atmosphere_from_property, default_wavelengths
+from skyref.plugins.medium import default_wavelengths
+from skyref.plugins.optics import atmosphere_from_property
 from skyref.plugins.variant_class import variant_class
 
 #: Height of the sensor above the ground when the observer stands on it, m (see module notes).
