@@ -12,6 +12,7 @@ import time
 
 import numpy as np
 
+from skyref import __version__
 from skyref.errors import ParameterError
 from skyref.sky import ORDER_NAMES, Sky
 
@@ -121,9 +122,7 @@ def render_sky(scene, spp: int | None = None, passes: int | None = None, seed: i
     radiance = radiance_passes.mean(axis=0)
     standard_error = radiance_passes.std(axis=0, ddof=1) / math.sqrt(settings.passes)
     samples = camera.width * camera.height * spp_per_pass * settings.passes
-    import skyref
-
-    metadata = {"skyref_version": skyref.__version__, "integrator": "atmosphere", "variant": mi.variant(),
+    metadata = {"skyref_version": __version__, "integrator": "atmosphere", "variant": mi.variant(),
                 "geometry": geometry, "spp": spp_per_pass * settings.passes, "passes": settings.passes,
                 "seed": settings.seed, "wavelengths_per_path": integrator.channels,
                 "render_time_s": elapsed, "samples_per_second": samples / elapsed}

@@ -36,7 +36,7 @@ class Sky:
             return np.where(self.radiance > 0, self.standard_error / self.radiance, np.nan)
 
     def rgb(self) -> np.ndarray:
-        """Linear sRGB (D65 white, absolute: Y in cd m^-2 / 683 ... see skyref.color)."""
+        """Linear sRGB, absolute: R = G = B = Y in cd m^-2 for D65 white (see skyref.color)."""
         from skyref.color import spectral_to_linear_srgb
 
         return spectral_to_linear_srgb(self.radiance, self.wavelengths_nm)

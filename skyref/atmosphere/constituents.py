@@ -57,10 +57,7 @@ class Constituent:
     def extinction_coefficient(self, wavelengths_nm) -> np.ndarray:
         return self.scattering_coefficient(wavelengths_nm) + self.absorption_coefficient(wavelengths_nm)
 
-    @property
-    def scatters(self) -> bool:
-        return self.phase is not None
-
+    #: The phase function of what it scatters; None for a pure absorber.
     phase: PhaseFunction | None = None
 
     def to_dict(self) -> dict:

@@ -90,10 +90,6 @@ class ConstituentOptics:
             self.tables["phase_values"] = mi.Float(np.asarray(constituent.phase.values, np.float32))
             self.sampling_g = float(np.clip(constituent.phase.asymmetry, -0.95, 0.95))
 
-    @property
-    def scatters(self) -> bool:
-        return self.phase_kind is not None
-
     # --- coefficients at relative density 1, per channel ----------------------------------------
 
     def coefficients(self, index: mi.UInt32):
@@ -181,7 +177,6 @@ class AtmosphereOptics:
             self.ground_albedo = _opaque(albedo.value)
         else:
             self.ground_albedo = mi.Float(albedo(self.wavelengths_nm).astype(np.float32))
-        self.scattering_components = [c for c in self.components if c.scatters]
 
     # --- parameters (mi.traverse) ---------------------------------------------------------------
 
