@@ -1,0 +1,11 @@
+"""Real-time LUT methods: precomputed tables of atmospheric scattering, as engines use them.
+
+Every method takes the same :class:`~skyref.atmosphere.Atmosphere` and wavelength grid as the
+ground truth, precomputes its tables (:meth:`~skyref.lut.base.LutMethod.precompute`) and answers
+:meth:`~skyref.lut.base.LutMethod.radiance` for view directions, so :mod:`skyref.audit` can
+compare it with the path tracer.
+
+Shared pieces: :mod:`skyref.lut.table` (GPU-texture lookups, float16/float32 storage),
+:mod:`skyref.lut.planet` (r, mu ray geometry), :mod:`skyref.lut.transmittance` (Bruneton's
+transmittance table, also Hillaire's).
+"""

@@ -1,0 +1,188 @@
+"""What every LUT method shares: the atmosphere's optics on a wavelength grid, precision,
+timing, and the one lookup interface the audit calls.
+
+A method is built from an :class:`~skyref.atmosphere.Atmosphere` and a wavelength grid,
+:meth:`LutMethod.precompute` fills its tables (timed), and :meth:`LutMethod.radiance` returns
+the radiance an observer sees, W m^-2 sr^-1 nm^-1, for view directions in the observer's
+east-north-up frame (the frame of :class:`skyref.sky.Sky`), without the solar disk. Where a
+view ray hits the ground the method adds the ground's reflected light as its paper does (or
+returns NaN there if the paper has no ground model).
+
+Dr.Jit works in double precision here (``mi.Float64``): r^2 - R^2 cancels in float32 near the
+ground, and the audit must measure a method's discretization, not float32 round-off. Table
+*storage* precision (float32 or float16) is a parameter of each method.
+"""
+
+from __future__ import annotations
+
+import time
+
+import drjit as dr
+import numpy as np
+
+from skyref.atmosphere.spectra import solar_irradiance, wavelength_grid
+from skyref.atmosphere.validation import check_array, check_choice, check_number
+from skyref.errors import ParameterError
+from skyref.lut.table import PRECISIONS
+from skyref.scene import SUN_ANGULAR_RADIUS_DEG
+
+
+def load_lut_backend(variant: str | None = None):
+    """Load Mitsuba (its Dr.Jit backend runs the LUT kernels) and return the module."""
+    from skyref.plugins import load_mitsuba
+
+    return load_mitsuba(variant)
+
+
+class LutOptics:
+    """The atmosphere as LUT methods see it: Rayleigh scattering, one aerosol ("Mie": Cornette–
+    Shanks or Henyey–Greenstein phase) and absorbers, per lane on a wavelength channel."""
+
+    def __init__(self, atmosphere, wavelengths_nm):
+        from skyref.plugins.optics import AtmosphereOptics
+
+        self.atmosphere = atmosphere
+        self.optics = AtmosphereOptics(atmosphere, wavelengths_nm)
+        self.wavelengths_nm = self.optics.wavelengths_nm
+        self.rayleigh = [c for c in self.optics.components if c.phase_kind == "rayleigh"]
+        self.mie = [c for c in self.optics.components if c.kind == "aerosol"]
+        self.absorbers = [c for c in self.optics.components if c.kind == "absorber"]
+        if len(self.rayleigh) > 1 or len(self.mie) > 1:
+            raise ParameterError("atmosphere", [c.name for c in self.optics.components],
+                                 "at most one Rayleigh constituent and one aerosol",
+                                 "LUT methods store one Rayleigh and one Mie term")
+        if self.mie and self.mie[0].phase_kind not in ("cornette_shanks", "henyey_greenstein"):
+            raise ParameterError(f"{self.mie[0].name}.phase", self.mie[0].phase_kind,
+                                 "cornette_shanks or henyey_greenstein", "not supported by LUT methods")
+        self.bottom_radius = float(atmosphere.bottom_radius_m)
+        self.top_radius = float(atmosphere.top_radius_m)
+
+    @property
+    def mie_g(self) -> float:
+        return float(self.mie[0].params["g"].numpy()[0]) if self.mie else 0.0
+
+    def scattering(self, altitude, channel):
+        """(Rayleigh scattering, Mie scattering) coefficients at ``altitude`` (m) for the lanes'
+        wavelength ``channel``, m^-1 (Float64)."""
+        import mitsuba as mi
+
+        rayleigh = mi.Float64(0.0)
+        for c in self.rayleigh:
+            rayleigh += mi.Float64(c.coefficients(channel)[0]) * c.density(altitude)
+        mie = mi.Float64(0.0)
+        for c in self.mie:
+            mie += mi.Float64(c.coefficients(channel)[0]) * c.density(altitude)
+        return rayleigh, mie
+
+    def extinction(self, altitude, channel):
+        """Total extinction coefficient at ``altitude`` (m) for the lanes' ``channel``, m^-1."""
+        import mitsuba as mi
+
+        total = mi.Float64(0.0)
+        for c in self.optics.components:
+            s, a = c.coefficients(channel)
+            rho = c.density(altitude)
+            if s is not None:
+                total += mi.Float64(s) * rho
+            if a is not None:
+                total += mi.Float64(a) * rho
+        return total
+
+    def mie_extinction_to_scattering(self, channel):
+        """sigma_t / sigma_s of the aerosol for the lanes' channel (1 without aerosol)."""
+        import mitsuba as mi
+
+        if not self.mie:
+            return mi.Float64(1.0)
+        s, a = self.mie[0].coefficients(channel)
+        return mi.Float64((s + a) / dr.maximum(s, 1e-30))
+
+    def rayleigh_phase(self, nu):
+        return self.rayleigh[0].phase(nu) if self.rayleigh else 0.0 * nu
+
+    def mie_phase(self, nu):
+        return self.mie[0].phase(nu) if self.mie else 0.0 * nu
+
+    def ground_albedo(self, channel):
+        import mitsuba as mi
+
+        albedo = self.optics.ground_albedo
+        index = channel if dr.width(albedo) > 1 else 0 * channel
+        return mi.Float64(dr.gather(mi.Float, albedo, index))
+
+
+class LutMethod:
+    """Base class: subclasses set :attr:`name`, implement ``_precompute()`` and
+    ``_radiance(r, mu, mu_s, nu)`` (view at radius r, m; cosines of view and sun zenith and of
+    the view–sun angle; returns a list of one Float64 array per wavelength)."""
+
+    name = ""
+
+    def __init__(self, atmosphere, wavelengths_nm="rgb", precision: str = "float32",
+                 sun_angular_radius_deg: float = SUN_ANGULAR_RADIUS_DEG, variant: str | None = None):
+        load_lut_backend(variant)
+        self.precision = check_choice("precision", precision, PRECISIONS)
+        self.sun_angular_radius = np.radians(check_number("sun_angular_radius_deg", sun_angular_radius_deg,
+                                                          0.0, 5.0, lo_open=True))
+        grid = wavelength_grid(wavelengths_nm) if isinstance(wavelengths_nm, (str, dict)) else wavelengths_nm
+        self.atmosphere = atmosphere
+        self.optics = LutOptics(atmosphere, grid)
+        self.wavelengths_nm = self.optics.wavelengths_nm
+        self.channels = len(self.wavelengths_nm)
+        self.solar_irradiance = solar_irradiance(self.wavelengths_nm)
+        self.precompute_seconds = None
+
+    # --- precomputation -------------------------------------------------------------------
+
+    def precompute(self) -> float:
+        """Compute the tables; returns (and stores in :attr:`precompute_seconds`) the wall time, s."""
+        start = time.perf_counter()
+        self._precompute()
+        dr.sync_thread()
+        self.precompute_seconds = time.perf_counter() - start
+        return self.precompute_seconds
+
+    def _precompute(self):
+        raise NotImplementedError
+
+    def tables(self) -> dict:
+        """name -> NumPy array of every precomputed table (as stored)."""
+        raise NotImplementedError
+
+    # --- lookups ----------------------------------------------------------------------------
+
+    def radiance(self, directions, sun_direction, observer_altitude_m: float) -> np.ndarray:
+        """Radiance seen from ``observer_altitude_m`` (m) along unit ``directions`` (M, 3),
+        east-north-up, with the sun towards ``sun_direction`` (3,): (M, N) W m^-2 sr^-1 nm^-1,
+        solar disk excluded."""
+        import mitsuba as mi
+
+        if self.precompute_seconds is None:
+            raise RuntimeError(f"{self.name}: call precompute() before radiance()")
+        dirs = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+        sun = np.asarray(sun_direction, dtype=np.float64).reshape(3)
+        check_number("observer_altitude_m", observer_altitude_m, 0.0, 1.0e8)
+        if not np.allclose(np.linalg.norm(dirs, axis=1), 1.0, atol=1e-6):
+            raise ParameterError("directions", "...", "unit vectors", "not normalized")
+        check_array("sun_direction", sun / np.linalg.norm(sun), -1.0, 1.0, min_length=3)
+        sun = sun / np.linalg.norm(sun)
+        r = self.optics.bottom_radius + float(observer_altitude_m)
+        mu = mi.Float64(dirs[:, 2])
+        mu_s = mi.Float64(np.full(len(dirs), sun[2]))
+        nu = mi.Float64(np.clip(dirs @ sun, -1.0, 1.0))
+        channels = self._radiance(mi.Float64(np.full(len(dirs), r)), mu, mu_s, nu)
+        return np.stack([np.asarray(c.numpy(), dtype=np.float64) for c in channels], axis=1)
+
+    def _radiance(self, r, mu, mu_s, nu):
+        raise NotImplementedError
+
+    def lookup_seconds_per_direction(self, directions, sun_direction, observer_altitude_m: float,
+                                     repeats: int = 3) -> float:
+        """Best-of-``repeats`` wall time of :meth:`radiance` per direction, s (all wavelengths)."""
+        self.radiance(directions[:16], sun_direction, observer_altitude_m)  # compile kernels
+        best = np.inf
+        for _ in range(repeats):
+            start = time.perf_counter()
+            self.radiance(directions, sun_direction, observer_altitude_m)
+            best = min(best, time.perf_counter() - start)
+        return best / len(directions)
