@@ -117,6 +117,22 @@ def cmd_render(args) -> int:
     return 0
 
 
+def cmd_batch(args) -> int:
+    from skyref.batch import load_grid, run_batch
+
+    grid = load_grid(args.grid)
+    if args.dry_run:
+        grid.validate()
+        print(f"{args.grid}: {len(grid)} skies ({' x '.join(f'{k}[{len(v)}]' for k, v in grid.axes.items())}), "
+              f"output {grid.output.directory}")
+        return 0
+    manifest = run_batch(grid, scheduler=args.scheduler, workers=args.workers, variant=args.variant,
+                         verify=args.verify, progress=not args.quiet)
+    print(f"{grid.output.directory}: {manifest['skies_finished']}/{manifest['skies_total']} skies finished, "
+          f"{len(manifest['failed'])} failed, this run {manifest['wall_time_s']:.1f} s")
+    return 1 if manifest["failed"] else 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="skyref", description="Reference skies: a spectral path tracer "
                                      "for planetary atmospheres and the tools that use it as ground truth.")
@@ -139,6 +155,16 @@ def build_parser() -> argparse.ArgumentParser:
                    help="planet geometry (plane_parallel is for comparisons with DISORT)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.set_defaults(run=cmd_render)
+
+    p = sub.add_parser("batch", help="render a grid of skies (resumable; local dask cluster or --scheduler)")
+    p.add_argument("grid", metavar="GRID", help="grid TOML file (base scene, axes, output)")
+    p.add_argument("--scheduler", help="address of a running dask scheduler (default: a local cluster)")
+    p.add_argument("--workers", type=int, help="local worker processes (default: one per two cores)")
+    p.add_argument("--variant", help="Mitsuba variant (default: cuda_ad_rgb with a GPU, else llvm_ad_rgb)")
+    p.add_argument("--verify", action="store_true", help="check finished skies' SHA-256 before skipping them")
+    p.add_argument("--dry-run", action="store_true", help="check the grid and print its size; render nothing")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(run=cmd_batch)
 
     p = sub.add_parser("info", help="versions, libLLVM, Mitsuba variants, presets")
     p.set_defaults(run=cmd_info)

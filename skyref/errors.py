@@ -15,6 +15,7 @@ class ParameterError(ValueError):
         self.name = name
         self.value = value
         self.valid = valid
+        self.problem = problem
         super().__init__(f"{name} = {value!r}: {problem} (valid: {valid})")
 
 

@@ -106,7 +106,8 @@ def render_sky(scene, spp: int | None = None, passes: int | None = None, seed: i
     for p in range(settings.passes):
         total = None
         for c, chunk_spp in enumerate(chunks):
-            seed_value = (settings.seed * settings.passes + p) * len(chunks) + c
+            # Distinct (seed, pass, chunk) give distinct sampler seeds; the sampler takes 32 bits.
+            seed_value = ((settings.seed * settings.passes + p) * len(chunks) + c) % (1 << 32)
             image = integrator.render_orders(sensor, seed=seed_value, spp=chunk_spp).numpy()
             total = image * chunk_spp if total is None else total + image * chunk_spp
             if bar is not None:
@@ -131,3 +132,56 @@ def render_sky(scene, spp: int | None = None, passes: int | None = None, seed: i
                directions=pixel_directions(camera),
                orders={name: orders_mean[..., i, :].astype(np.float32) for i, name in enumerate(ORDER_NAMES)},
                scene=scene, metadata=metadata)
+
+
+def relative_error_percentile(sky: Sky, percentile: float = 95.0) -> float:
+    """The ``percentile`` of standard error / radiance over all pixels and wavelengths with
+    radiance > 0: how noisy the sky still is (0 for an all-black sky)."""
+    relative = sky.relative_error()
+    finite = relative[np.isfinite(relative)]
+    return float(np.percentile(finite, percentile)) if finite.size else 0.0
+
+
+def combine_skies(skies: list) -> Sky:
+    """Pool independent renders of one scene: the mean weighted by samples per pixel, with
+    standard error sqrt(sum_i (n_i / n)^2 SE_i^2)."""
+    counts = np.array([s.metadata["spp"] for s in skies], dtype=np.float64)
+    weights = counts / counts.sum()
+    first = skies[0]
+    radiance = sum(w * s.radiance.astype(np.float64) for w, s in zip(weights, skies))
+    variance = sum((w * s.standard_error.astype(np.float64)) ** 2 for w, s in zip(weights, skies))
+    orders = {name: sum(w * s.orders[name].astype(np.float64) for w, s in zip(weights, skies)).astype(np.float32)
+              for name in first.orders}
+    render_time = sum(s.metadata["render_time_s"] for s in skies)
+    samples = sum(s.metadata["samples_per_second"] * s.metadata["render_time_s"] for s in skies)
+    metadata = dict(first.metadata, spp=int(counts.sum()), passes=sum(s.metadata["passes"] for s in skies),
+                    seed=[s.metadata["seed"] for s in skies], render_time_s=render_time,
+                    samples_per_second=samples / render_time)
+    return Sky(radiance=radiance.astype(np.float32), standard_error=np.sqrt(variance).astype(np.float32),
+               wavelengths_nm=first.wavelengths_nm, directions=first.directions, orders=orders,
+               scene=first.scene, metadata=metadata)
+
+
+def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, initial_spp: int | None = None,
+                    variant: str | None = None) -> Sky:
+    """Render ``scene`` in rounds until :func:`relative_error_percentile` (95th) is at most
+    ``target_relative_error`` or ``max_spp`` samples per pixel are spent. Round r uses seed
+    ``seeds[r]`` (so rounds are independent); each round after the first is sized by the
+    1/sqrt(spp) law with 10% margin. The sky's metadata records the error reached."""
+    passes = scene.render.passes
+    spp = initial_spp or max(16 * passes, 64)
+    skies = [render_sky(scene, spp=min(spp, max_spp), seed=seeds[0], variant=variant)]
+    sky = skies[0]
+    error = relative_error_percentile(sky)
+    for seed in seeds[1:]:
+        spent = sky.metadata["spp"]
+        if error <= target_relative_error or spent >= max_spp:
+            break
+        needed = math.ceil(1.1 * spent * (error / target_relative_error) ** 2)
+        extra = min(max(needed - spent, passes), max_spp - spent)
+        extra = max(passes, extra - extra % passes)
+        skies.append(render_sky(scene, spp=extra, seed=seed, variant=variant))
+        sky = combine_skies(skies)
+        error = relative_error_percentile(sky)
+    sky.metadata.update(target_relative_error=target_relative_error, relative_error_p95=error)
+    return sky

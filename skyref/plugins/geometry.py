@@ -36,20 +36,23 @@ class SphericalShell:
         self.h0 = float(observer_altitude_m)
         self.centre_distance = self.R + self.h0          # |c|, float64
         self.altitude_offset = self.h0 * (2.0 * self.R + self.h0)  # |c|^2 - R^2, float64
+        # Kernel copies are opaque: a new observer altitude reuses the compiled kernels.
+        self._centre = dr.opaque(mi.Float, self.centre_distance)
+        self._offset = dr.opaque(mi.Float, self.altitude_offset)
 
     def altitude(self, p: mi.Point3f) -> mi.Float:
         """Altitude above the ground of point ``p``, m (cancellation-free)."""
-        q = dr.squared_norm(p) + (2.0 * self.centre_distance) * p.z + self.altitude_offset
-        r = dr.sqrt(dr.maximum(dr.squared_norm(mi.Vector3f(p.x, p.y, p.z + self.centre_distance)), 0.0))
+        q = dr.squared_norm(p) + (2.0 * self._centre) * p.z + self._offset
+        r = dr.sqrt(dr.maximum(dr.squared_norm(mi.Vector3f(p.x, p.y, p.z + self._centre)), 0.0))
         return q / (r + self.R)
 
     def up(self, p: mi.Point3f) -> mi.Vector3f:
         """Local zenith (outward normal of the ground sphere through ``p``)."""
-        return dr.normalize(mi.Vector3f(p.x, p.y, p.z + self.centre_distance))
+        return dr.normalize(mi.Vector3f(p.x, p.y, p.z + self._centre))
 
     def _radial_projection(self, p, d):
         # b = dot(p - c, d): negative while the ray approaches the planet's centre.
-        return dr.dot(p, d) + self.centre_distance * d.z
+        return dr.dot(p, d) + self._centre * d.z
 
     def _c_term(self, h, shell):
         # r^2 - rho^2 for the sphere of radius rho = R + shell, factored to avoid cancellation.
@@ -96,9 +99,10 @@ class PlaneParallelSlab:
     def __init__(self, thickness_m: float, observer_altitude_m: float):
         self.H = float(thickness_m)
         self.h0 = float(observer_altitude_m)
+        self._h0 = dr.opaque(mi.Float, self.h0)
 
     def altitude(self, p):
-        return p.z + self.h0
+        return p.z + self._h0
 
     def up(self, p):
         return mi.Vector3f(0.0, 0.0, 1.0) + 0.0 * p

@@ -89,7 +89,8 @@ class SunLight:
     the beam at the top of the atmosphere)."""
 
     def __init__(self, direction, angular_radius_rad, irradiance, limb_darkening=False):
-        self.direction = mi.Vector3f(*[float(x) for x in direction])
+        # Opaque: skies that differ only in the sun's position share compiled kernels.
+        self.direction = mi.Vector3f(*[dr.opaque(mi.Float, float(x)) for x in direction])
         self.cos_radius = float(math.cos(angular_radius_rad))
         self.solid_angle = 2.0 * math.pi * (1.0 - self.cos_radius)
         self.irradiance = mi.Float(np.asarray(irradiance, np.float32))

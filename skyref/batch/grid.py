@@ -1,0 +1,252 @@
+"""A batch grid: a base scene, axes to sweep and output settings, read from TOML.
+
+::
+
+    [base]
+    scene = "../scenes/earth-clear.toml"     # relative to the grid file; or an inline [base.scene] table
+
+    [axes]                                   # the Cartesian product of all axes is rendered
+    "sun.zenith_deg" = [0, 30, 60, 80]
+    "atmosphere.turbidity" = [2, 4]
+    "atmosphere.constituents.aerosol.phase.g" = [0.7, 0.8]
+
+    [output]
+    directory = "out/batch"                  # relative to the grid file
+    format = "spectral"                      # dataset holds spectral radiance, or "rgb" (linear sRGB)
+    width = 64                               # optional camera overrides
+    height = 32
+    spp = 64                                 # samples per pixel, or instead:
+    # target_relative_error = 0.01           # render until the 95th percentile of stderr/radiance <= 1%
+    passes = 4
+    seed = 0
+
+An axis is a path into the scene's TOML tables (``sun.zenith_deg``, ``observer.altitude_m``,
+``atmosphere.preset``, ``atmosphere.turbidity``, ``atmosphere.ground_albedo``,
+``atmosphere.constituents.<name>.<field>``, ...); each value replaces that entry of the base
+scene (atmosphere entries override its preset as in a scene file). Every axis value is checked
+by building the scene it makes, before any work starts, and errors name the axis.
+
+Skies are numbered in C order over the axes (the last axis fastest); round r of sky i (a
+target-error render adds rounds until it is good enough) renders with seed
+``(output.seed * MAX_ROUNDS + r) * count + i``: disjoint across skies and rounds, and the same
+wherever the grid runs, so a grid gives the same data on any machine or cluster.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import itertools
+import json
+import math
+import os
+import tomllib
+from dataclasses import dataclass
+
+import numpy as np
+
+from skyref.atmosphere.validation import check_choice, check_fields, check_number
+from skyref.errors import ParameterError
+
+FORMATS = ("spectral", "rgb")
+#: Scene tables an axis may sweep (the camera, wavelengths and render settings fix the shape
+#: and sampling of every sky and come from the base scene and [output]).
+AXIS_TABLES = ("sun", "observer", "atmosphere")
+#: Largest spp / max_spp accepted.
+MAX_SPP_LIMIT = 1 << 20
+#: Most rendering rounds of one sky (a target-error render).
+MAX_ROUNDS = 8
+
+
+@dataclass(frozen=True)
+class OutputSettings:
+    """Where and how skies are written and how many samples they get."""
+
+    directory: str
+    format: str = "spectral"
+    width: int | None = None
+    height: int | None = None
+    spp: int | None = None
+    target_relative_error: float | None = None
+    max_spp: int = 16384
+    passes: int = 4
+    seed: int = 0
+
+    def __post_init__(self):
+        check_choice("output.format", self.format, FORMATS)
+        for name in ("width", "height"):
+            if getattr(self, name) is not None:
+                _check_int(f"output.{name}", getattr(self, name), 1, 1 << 14)
+        if (self.spp is None) == (self.target_relative_error is None):
+            raise ParameterError("output.spp", self.spp, "exactly one of output.spp and "
+                                 "output.target_relative_error", "give one sample budget")
+        if self.spp is not None:
+            _check_int("output.spp", self.spp, 2, MAX_SPP_LIMIT)
+        if self.target_relative_error is not None:
+            check_number("output.target_relative_error", self.target_relative_error, 1e-4, 1.0)
+        _check_int("output.max_spp", self.max_spp, 2, MAX_SPP_LIMIT)
+        _check_int("output.passes", self.passes, 2, 64)
+        _check_int("output.seed", self.seed, 0, 1 << 16)
+        if self.spp is not None and self.spp < self.passes:
+            raise ParameterError("output.spp", self.spp, f">= output.passes ({self.passes})", "too few samples")
+
+
+def _check_int(name, value, lo, hi) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
+        raise ParameterError(name, value, f"an integer in [{lo}, {hi}]", "invalid value")
+    return value
+
+
+def _set_path(data: dict, path: str, value) -> dict:
+    """A deep copy of ``data`` with the entry at dotted ``path`` set to ``value``."""
+    result = copy.deepcopy(data)
+    node = result
+    keys = path.split(".")
+    for key in keys[:-1]:
+        child = node.get(key)
+        if not isinstance(child, dict):
+            child = {}
+            node[key] = child
+        node = child
+    node[keys[-1]] = value
+    return result
+
+
+@dataclass(frozen=True)
+class SkySpec:
+    """One sky of a grid: its index, id, axis values, scene (as a TOML dict) and seed."""
+
+    index: int
+    sky_id: str
+    coordinates: dict
+    scene: dict
+    seed: int
+
+
+@dataclass(frozen=True)
+class Grid:
+    """A base scene (TOML dict), axes (path -> list of values) and output settings."""
+
+    base: dict
+    axes: dict
+    output: OutputSettings
+    source: str = ""
+
+    def __post_init__(self):
+        if not self.axes:
+            raise ParameterError("axes", {}, "at least one axis with values", "no axes")
+        for path, values in self.axes.items():
+            if path.split(".")[0] not in AXIS_TABLES:
+                raise ParameterError(f"axes.{path}", values, "a path into one of the scene tables "
+                                     + ", ".join(AXIS_TABLES), "not a sweepable entry")
+            if not isinstance(values, list) or not values:
+                raise ParameterError(f"axes.{path}", values, "a non-empty list of values", "empty or not a list")
+            if any(isinstance(v, (dict, list)) for v in values):
+                raise ParameterError(f"axes.{path}", values, "a list of numbers or strings", "nested values")
+            if len({json.dumps(v, sort_keys=True) for v in values}) != len(values):
+                raise ParameterError(f"axes.{path}", values, "distinct values", "repeated value")
+
+    # --- the skies --------------------------------------------------------------------------
+
+    @property
+    def shape(self) -> tuple:
+        return tuple(len(v) for v in self.axes.values())
+
+    def __len__(self) -> int:
+        return math.prod(self.shape)
+
+    def scene_dict(self, coordinates: dict) -> dict:
+        """The base scene with the axes set to ``coordinates`` and the output overrides applied."""
+        data = self.base
+        for path, value in coordinates.items():
+            data = _set_path(data, path, value)
+        camera = dict(data.get("camera", {}))
+        for name in ("width", "height"):
+            if getattr(self.output, name) is not None:
+                camera[name] = getattr(self.output, name)
+        data = dict(data, camera=camera)
+        data["render"] = dict(data.get("render", {}), passes=self.output.passes)
+        return data
+
+    def sky_id(self, index: int) -> str:
+        return f"sky-{index:0{len(str(len(self) - 1))}d}"
+
+    def sky(self, index: int) -> SkySpec:
+        position = np.unravel_index(index, self.shape)
+        coordinates = {path: values[i] for (path, values), i in zip(self.axes.items(), position)}
+        return SkySpec(index=index, sky_id=self.sky_id(index), coordinates=coordinates,
+                       scene=self.scene_dict(coordinates), seed=self.seed(index, 0))
+
+    def skies(self):
+        """Every sky, generated lazily (a grid of 10,000 skies is never held in memory)."""
+        return (self.sky(i) for i in range(len(self)))
+
+    def seed(self, index: int, round_index: int) -> int:
+        """Seed of sky ``index`` in rendering round ``round_index`` (see module docstring)."""
+        return (self.output.seed * MAX_ROUNDS + round_index) * len(self) + index
+
+    # --- checks -----------------------------------------------------------------------------
+
+    def validate(self):
+        """Build the base scene, the scene of every axis value (the other axes as in the base)
+        and the scenes of the grid's corners; raise :class:`ParameterError` naming the base,
+        the axis or the combination at fault. Returns the scene of sky 0."""
+        from skyref.scene import Scene
+
+        def build(coordinates, name, value):
+            try:
+                return Scene.from_dict(self.scene_dict(coordinates))
+            except ParameterError as exc:
+                raise ParameterError(name, value, exc.valid,
+                                     f"gives {exc.name} = {exc.value!r}: {exc.problem}") from None
+
+        build({}, "base.scene", "(with [output] applied)")
+        for path, values in self.axes.items():
+            for value in values:
+                build({path: value}, f"axes.{path}", value)
+        for corner in itertools.product(*[(values[0], values[-1]) for values in self.axes.values()]):
+            coordinates = dict(zip(self.axes, corner))
+            build(coordinates, "axes", coordinates)
+        return build(self.sky(0).coordinates, "axes", self.sky(0).coordinates)
+
+    def fingerprint(self) -> str:
+        """JSON that identifies the grid's content (not its file location)."""
+        return json.dumps({"base": self.base, "axes": self.axes,
+                           "output": {k: v for k, v in dataclasses.asdict(self.output).items() if k != "directory"}},
+                          sort_keys=True)
+
+
+def load_grid(path) -> Grid:
+    """Read a grid TOML file; relative paths in it are relative to the file."""
+    from skyref.scene import load_scene
+
+    path = os.fspath(path)
+    try:
+        with open(path, "rb") as f:
+            data = tomllib.load(f)
+    except FileNotFoundError:
+        raise ParameterError("grid", path, "an existing TOML file", "file not found") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ParameterError("grid", path, "valid TOML", f"TOML syntax error: {exc}") from None
+    for key in data:
+        if key not in ("base", "axes", "output"):
+            raise ParameterError(key, data[key], "tables [base], [axes], [output]", "unknown entry")
+    here = os.path.dirname(os.path.abspath(path))
+    base = data.get("base", {})
+    for key in base:
+        if key != "scene":
+            raise ParameterError(f"base.{key}", base[key], "only base.scene", "unknown entry")
+    scene = base.get("scene")
+    if isinstance(scene, str):
+        scene_path = os.path.join(here, scene)
+        load_scene(scene_path)  # validates and names the file in errors
+        with open(scene_path, "rb") as f:
+            scene = tomllib.load(f)
+    elif not isinstance(scene, dict):
+        raise ParameterError("base.scene", scene, "a scene file path or a [base.scene] table", "missing")
+    output = dict(data.get("output", {}))
+    if "directory" not in output:
+        raise ParameterError("output.directory", None, "a directory for the skies", "missing")
+    output["directory"] = os.path.join(here, str(output["directory"]))
+    check_fields("output", output, OutputSettings)
+    return Grid(base=scene, axes=dict(data.get("axes", {})), output=OutputSettings(**output), source=path)

@@ -1,0 +1,107 @@
+"""Run a grid: check it, find the skies still to do, and render them on dask workers.
+
+By default a ``dask.distributed.LocalCluster`` sized to this machine runs the skies (one sky
+per worker process at a time; Dr.Jit's threads split between the workers); ``scheduler`` names
+any running dask scheduler instead (``tcp://host:8786``), so a Slurm or Kubernetes dask cluster
+scales the same grid out — workers then need the output directory on a shared file system.
+At most two skies per worker are in flight, so the client's memory does not grow with the
+grid. A sky that fails is reported and left unmarked; the next run retries it.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+
+from skyref.batch.grid import MAX_ROUNDS, Grid
+from skyref.batch.store import BatchStore
+from skyref.batch.worker import render_and_store
+from skyref.errors import ParameterError
+
+
+def make_task(grid: Grid, spec, variant, drjit_threads) -> dict:
+    return {"grid": grid, "sky": spec, "variant": variant, "drjit_threads": drjit_threads,
+            "max_rounds": MAX_ROUNDS}
+
+
+def local_cluster(workers: int | None):
+    """A LocalCluster of ``workers`` single-threaded processes (default: one per two cores,
+    at least one) sharing this machine's memory; returns (cluster, Dr.Jit threads per worker)."""
+    from dask.distributed import LocalCluster
+
+    cores = os.cpu_count() or 1
+    workers = workers or max(1, cores // 2)
+    if not 1 <= workers <= cores:
+        raise ParameterError("workers", workers, f"an integer in [1, {cores}] (this machine's cores)", "invalid")
+    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                           silence_logs=logging.ERROR)
+    return cluster, max(1, cores // workers)
+
+
+def run_batch(grid: Grid, scheduler: str | None = None, workers: int | None = None, variant: str | None = None,
+              verify: bool = False, progress: bool = True, log=print) -> dict:
+    """Render every unfinished sky of ``grid``; returns the manifest (see
+    :class:`skyref.batch.store.BatchStore`) plus ``failed`` (sky id -> error message) and
+    ``wall_time_s``."""
+    from dask.distributed import Client, as_completed
+
+    first_scene = grid.validate()
+    store = BatchStore(grid)
+    store.check_writable()
+    if workers is not None and scheduler is not None:
+        raise ParameterError("workers", workers, "only without --scheduler (the cluster sizes itself)", "conflict")
+    with store.lock():
+        store.prepare(first_scene)
+        pending_indices = [i for i in range(len(grid)) if not store.is_finished(grid.sky_id(i), verify)]
+        pending = (grid.sky(i) for i in pending_indices)
+        done_before = len(grid) - len(pending_indices)
+        log(f"skyref batch: {len(grid)} skies on a {' x '.join(map(str, grid.shape))} grid, "
+            f"{done_before} already finished, output {store.directory}")
+        start = time.perf_counter()
+        failed = {}
+        cluster = None
+        if scheduler is None:
+            cluster, threads = local_cluster(workers)
+            client = Client(cluster)
+        else:
+            client, threads = Client(scheduler), None
+        bar = None
+        if progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=len(grid), initial=done_before, unit="sky", desc="skyref batch", smoothing=0.1)
+        try:
+            window = 2 * max(1, len(client.scheduler_info(n_workers=-1)["workers"]))
+            queue = as_completed()
+            in_flight = {}
+
+            def submit_next():
+                spec = next(pending, None)
+                if spec is not None:
+                    future = client.submit(render_and_store, make_task(grid, spec, variant, threads), pure=False,
+                                           key=f"{spec.sky_id}-{os.getpid()}-{time.monotonic_ns()}")
+                    in_flight[future] = spec
+                    queue.add(future)
+
+            for _ in range(window):
+                submit_next()
+            for future in queue:
+                spec = in_flight.pop(future)
+                try:
+                    future.result()
+                except Exception as exc:  # reported, left unmarked, retried by the next run
+                    failed[spec.sky_id] = f"{type(exc).__name__}: {exc}"
+                    log(f"skyref batch: {spec.sky_id} {spec.coordinates} failed: {failed[spec.sky_id]}")
+                if bar is not None:
+                    bar.update(1)
+                submit_next()
+        finally:
+            if bar is not None:
+                bar.close()
+            client.close()
+            if cluster is not None:
+                cluster.close()
+        manifest = store.write_manifest()
+    manifest.update(failed=failed, wall_time_s=time.perf_counter() - start)
+    return manifest

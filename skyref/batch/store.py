@@ -1,0 +1,178 @@
+"""The output directory of a batch, and what makes it safe to kill and rerun.
+
+::
+
+    <directory>/grid.json            the grid's fingerprint: a rerun must use the same grid
+    <directory>/skies/<id>.exr       one spectral EXR per sky (skyref.io.exr layout)
+    <directory>/markers/<id>.json    completion marker: written last, atomically, with the EXR's
+                                     SHA-256 and size, the sky's parameters, samples and timings
+    <directory>/dataset.zarr         every sky in one xarray dataset (axes as dimensions)
+    <directory>/manifest.json        the markers gathered, rewritten at the end of each run
+
+A sky counts as finished only if its marker exists and its EXR has the marker's size (and,
+with ``verify``, its SHA-256). EXRs and markers are written to temporary names and renamed, so
+a run killed at any moment (even ``kill -9``) leaves either nothing or a complete file under
+the final name; the dataset region of a sky is written *before* its marker, so an unmarked
+sky's data is simply rewritten by the next run. Leftover temporary files are removed when a
+run starts; a lock file stops two runs from sharing a directory.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import glob
+import hashlib
+import json
+import os
+import warnings
+
+import numpy as np
+
+from skyref.errors import ParameterError
+from skyref.io.atomic import atomic_write
+
+DATASET = "dataset.zarr"
+
+
+def sha256_of(path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+class BatchStore:
+    """The output directory of one grid (see module docstring)."""
+
+    def __init__(self, grid):
+        self.grid = grid
+        self.directory = os.path.abspath(grid.output.directory)
+        self.dataset_path = os.path.join(self.directory, DATASET)
+
+    def exr_path(self, sky_id: str) -> str:
+        return os.path.join(self.directory, "skies", f"{sky_id}.exr")
+
+    def marker_path(self, sky_id: str) -> str:
+        return os.path.join(self.directory, "markers", f"{sky_id}.json")
+
+    # --- opening ----------------------------------------------------------------------------
+
+    def check_writable(self):
+        """Fail before any work if the directory cannot be created and written."""
+        import tempfile
+
+        try:
+            os.makedirs(self.directory, exist_ok=True)
+            with tempfile.TemporaryFile(dir=self.directory):
+                pass
+        except OSError as exc:
+            raise ParameterError("output.directory", self.directory, "a writable directory",
+                                 f"cannot write there ({exc.strerror})") from None
+
+    @contextlib.contextmanager
+    def lock(self):
+        """Hold the directory's lock for a run (released by the OS even on ``kill -9``)."""
+        with open(os.path.join(self.directory, ".lock"), "w") as handle:
+            try:
+                fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                raise ParameterError("output.directory", self.directory, "a directory no other batch "
+                                     "is writing", "another skyref batch is running there") from None
+            yield
+
+    def prepare(self, first_scene):
+        """Check the directory belongs to this grid (or claim it), remove temporary files left
+        by a killed run, and create the dataset on first use."""
+        for sub in ("skies", "markers"):
+            os.makedirs(os.path.join(self.directory, sub), exist_ok=True)
+        fingerprint_path = os.path.join(self.directory, "grid.json")
+        fingerprint = self.grid.fingerprint()
+        if os.path.exists(fingerprint_path):
+            with open(fingerprint_path) as f:
+                if f.read() != fingerprint:
+                    raise ParameterError("output.directory", self.directory, "an empty directory or one "
+                                         "holding this same grid", "it holds the output of a different grid")
+        else:
+            with atomic_write(fingerprint_path) as f:
+                f.write(fingerprint)
+        for leftover in glob.glob(os.path.join(self.directory, "*", ".*.tmp*")):
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(leftover)
+        if not os.path.exists(os.path.join(self.dataset_path, "zarr.json")):
+            self._create_dataset(first_scene)
+
+    def _create_dataset(self, scene):
+        """The dataset's layout, coordinates and metadata; the sky data stay unwritten (NaN)
+        until each sky's worker fills its chunk."""
+        import dask.array as da
+        import xarray as xr
+
+        from skyref.io.atomic import atomic_path
+
+        grid = self.grid
+        axes = list(grid.axes)
+        height, width = scene.camera.height, scene.camera.width
+        if grid.output.format == "spectral":
+            pixel_dims, pixel_shape = ("row", "column", "wavelength"), (height, width, len(scene.wavelengths_nm))
+            image_vars = {"radiance": "W m-2 sr-1 nm-1", "standard_error": "W m-2 sr-1 nm-1"}
+        else:
+            pixel_dims, pixel_shape = ("row", "column", "channel"), (height, width, 3)
+            image_vars = {"rgb": "linear sRGB, Y in cd m-2"}
+        shape = grid.shape
+        ones = (1,) * len(shape)
+        variables = {name: (axes + list(pixel_dims),
+                            da.full(shape + pixel_shape, np.nan, dtype=np.float32, chunks=ones + pixel_shape),
+                            {"units": unit}) for name, unit in image_vars.items()}
+        for name, dtype, unit in (("spp", np.float32, "samples per pixel"), ("render_time_s", np.float32, "s"),
+                                  ("relative_error_p95", np.float32, "1")):
+            variables[name] = (axes, da.full(shape, np.nan, dtype=dtype, chunks=ones), {"units": unit})
+        coords = {path: (path, np.asarray(values)) for path, values in grid.axes.items()}
+        if grid.output.format == "spectral":
+            coords["wavelength"] = ("wavelength", np.asarray(scene.wavelengths_nm), {"units": "nm"})
+        else:
+            coords["channel"] = ("channel", np.array(["R", "G", "B"]))
+        dataset = xr.Dataset(variables, coords=coords,
+                             attrs={"title": "skyref reference skies", "grid": grid.fingerprint(),
+                                    "camera": json.dumps(scene.camera.to_dict())})
+        with warnings.catch_warnings():  # consolidated metadata is a zarr-python extension to v3
+            warnings.simplefilter("ignore", category=UserWarning)
+            dataset.to_zarr(self.dataset_path, mode="w", compute=False, zarr_format=3)
+
+    # --- per sky ----------------------------------------------------------------------------
+
+    def is_finished(self, sky_id: str, verify: bool = False) -> bool:
+        try:
+            with open(self.marker_path(sky_id)) as f:
+                marker = json.load(f)
+            if os.path.getsize(self.exr_path(sky_id)) != marker["exr_bytes"]:
+                return False
+            return not verify or sha256_of(self.exr_path(sky_id)) == marker["exr_sha256"]
+        except (OSError, ValueError, KeyError):
+            return False
+
+    def write_region(self, index: int, values: dict):
+        """Write one sky's arrays (name -> array) into its chunk of the dataset."""
+        import zarr
+
+        group = zarr.open_group(self.dataset_path, mode="r+")
+        position = tuple(int(i) for i in np.unravel_index(index, self.grid.shape))
+        for name, value in values.items():
+            group[name][position] = value
+
+    def write_marker(self, sky_id: str, marker: dict):
+        with atomic_write(self.marker_path(sky_id)) as f:
+            json.dump(marker, f, sort_keys=True)
+
+    def write_manifest(self) -> dict:
+        """Gather every marker into ``manifest.json`` (atomically); returns the manifest."""
+        markers = []
+        for path in sorted(glob.glob(os.path.join(self.directory, "markers", "*.json"))):
+            with open(path) as f:
+                markers.append(json.load(f))
+        manifest = {"grid": json.loads(self.grid.fingerprint()), "axes": list(self.grid.axes),
+                    "skies_total": len(self.grid), "skies_finished": len(markers), "skies": markers}
+        with atomic_write(os.path.join(self.directory, "manifest.json")) as f:
+            json.dump(manifest, f, indent=1, sort_keys=True)
+        return manifest

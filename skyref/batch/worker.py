@@ -1,0 +1,61 @@
+"""What a dask worker does for one sky: render it, write its EXR, its dataset chunk and, last,
+its completion marker. It returns only the marker (a few hundred bytes), so the client never
+holds sky data, and the worker holds one sky at a time."""
+
+from __future__ import annotations
+
+import datetime
+import os
+import resource
+import time
+
+import numpy as np
+
+
+def render_and_store(task: dict) -> dict:
+    """Render the sky described by ``task`` (built by :func:`skyref.batch.run.make_task`) and
+    store it; returns its marker."""
+    from skyref.batch.store import BatchStore, sha256_of
+    from skyref.io.exr import write_sky_exr
+    from skyref.render import relative_error_percentile, render_sky, render_to_error
+    from skyref.scene import Scene
+
+    start = time.perf_counter()
+    if task["drjit_threads"]:
+        import drjit as dr
+
+        from skyref.plugins import load_mitsuba
+
+        load_mitsuba(task["variant"])
+        dr.set_thread_count(task["drjit_threads"])
+    grid, spec = task["grid"], task["sky"]
+    output = grid.output
+    scene = Scene.from_dict(spec.scene).replace(name=spec.sky_id)
+    if output.spp is not None:
+        sky = render_sky(scene, spp=output.spp, seed=spec.seed, variant=task["variant"])
+        sky.metadata["relative_error_p95"] = relative_error_percentile(sky)
+    else:
+        seeds = [grid.seed(spec.index, r) for r in range(task["max_rounds"])]
+        sky = render_to_error(scene, output.target_relative_error, seeds, output.max_spp, variant=task["variant"])
+    sky.metadata["batch"] = {"sky_id": spec.sky_id, "index": spec.index, "coordinates": spec.coordinates}
+
+    store = BatchStore(grid)
+    exr_path = store.exr_path(spec.sky_id)
+    write_sky_exr(sky, exr_path)
+    meta = sky.metadata
+    if output.format == "spectral":
+        images = {"radiance": sky.radiance, "standard_error": sky.standard_error}
+    else:
+        images = {"rgb": sky.rgb().astype(np.float32)}
+    store.write_region(spec.index, dict(images, spp=np.float32(meta["spp"]),
+                                        render_time_s=np.float32(meta["render_time_s"]),
+                                        relative_error_p95=np.float32(meta["relative_error_p95"])))
+    marker = {"sky_id": spec.sky_id, "index": spec.index, "coordinates": spec.coordinates,
+              "exr": os.path.relpath(exr_path, store.directory), "exr_sha256": sha256_of(exr_path),
+              "exr_bytes": os.path.getsize(exr_path), "spp": meta["spp"], "seed": meta["seed"],
+              "relative_error_p95": meta["relative_error_p95"], "render_time_s": meta["render_time_s"],
+              "task_time_s": time.perf_counter() - start, "variant": meta["variant"],
+              "worker_peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+              "finished_at": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
+    store.write_marker(spec.sky_id, marker)
+    return marker

@@ -1,0 +1,225 @@
+"""Batch generation: grid checks before any work, deterministic seeds, resumability after
+kill -9, and the dataset matching the EXRs."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from skyref.batch.grid import MAX_ROUNDS, load_grid
+from skyref.errors import ParameterError
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SCENE = os.path.join(ROOT, "scenes", "earth-clear.toml")
+
+
+def write_grid(path, axes: str, output: str):
+    path.write_text(f'[base]\nscene = "{SCENE}"\n[axes]\n{axes}\n[output]\n{output}\n')
+    return str(path)
+
+
+GOOD_AXES = '"sun.zenith_deg" = [20.0, 60.0, 85.0]\n"atmosphere.ground_albedo" = [0.0, 0.5]'
+GOOD_OUTPUT = 'directory = "out"\nwidth = 12\nheight = 6\nspp = 8\npasses = 2'
+
+
+@pytest.mark.parametrize("axes,output,name", [
+    ('"sun.zenith" = [10.0]', GOOD_OUTPUT, "axes.sun.zenith"),
+    ('"sun.zenith_deg" = [10.0, 200.0]', GOOD_OUTPUT, "axes.sun.zenith_deg"),
+    ('"atmosphere.constituents.aerosol.angstrom_beta" = [0.01, -1.0]', GOOD_OUTPUT,
+     "axes.atmosphere.constituents.aerosol.angstrom_beta"),
+    ('"sun.zenith_deg" = []', GOOD_OUTPUT, "axes.sun.zenith_deg"),
+    ('"sun.zenith_deg" = [10.0, 10.0]', GOOD_OUTPUT, "axes.sun.zenith_deg"),
+    ('"camera.width" = [10, 20]', GOOD_OUTPUT, "axes.camera.width"),
+    ('"atmosphere.preset" = ["bruneton2017", "mars"]', GOOD_OUTPUT, "axes.atmosphere.preset"),
+    (GOOD_AXES, 'directory = "out"\nspp = 8\ntarget_relative_error = 0.1', "output.spp"),
+    (GOOD_AXES, 'directory = "out"\nspp = 8\nformat = "hdr"', "output.format"),
+    (GOOD_AXES, 'directory = "out"\nspp = 8\ncolour = 1', "output.colour"),
+])
+def test_bad_grid_is_rejected_naming_the_entry(tmp_path, axes, output, name):
+    with pytest.raises(ParameterError) as info:
+        grid = load_grid(write_grid(tmp_path / "grid.toml", axes, output))
+        grid.validate()
+    assert info.value.name == name, str(info.value)
+    assert not (tmp_path / "out").exists()
+
+
+def test_unwritable_output_is_rejected_before_rendering(tmp_path):
+    from skyref.batch import run_batch
+
+    (tmp_path / "a-file").write_text("not a directory")
+    grid = load_grid(write_grid(tmp_path / "grid.toml", GOOD_AXES,
+                                GOOD_OUTPUT.replace('"out"', '"a-file/out"')))
+    started = time.perf_counter()
+    with pytest.raises(ParameterError) as info:
+        run_batch(grid, workers=1, progress=False)
+    assert info.value.name == "output.directory"
+    assert time.perf_counter() - started < 5.0  # no cluster was started
+
+
+def test_cli_reports_bad_grid_in_one_line(tmp_path):
+    from skyref.cli import main
+
+    path = write_grid(tmp_path / "grid.toml", '"sun.zenith_deg" = [10.0, 200.0]', GOOD_OUTPUT)
+    assert main(["batch", path, "-q"]) == 2
+
+
+def test_seeds_are_distinct_across_skies_rounds_and_base_seeds(tmp_path):
+    seen = set()
+    for base_seed in (0, 1, 2):
+        grid = load_grid(write_grid(tmp_path / "grid.toml", GOOD_AXES, GOOD_OUTPUT + f"\nseed = {base_seed}"))
+        seeds = [grid.seed(i, r) for i in range(len(grid)) for r in range(MAX_ROUNDS)]
+        assert len(set(seeds)) == len(seeds)
+        assert not seen & set(seeds)
+        seen |= set(seeds)
+    # The same grid file gives the same seed and scene for every sky.
+    again = load_grid(write_grid(tmp_path / "grid.toml", GOOD_AXES, GOOD_OUTPUT + "\nseed = 2"))
+    assert [again.sky(i) for i in range(len(again))] == [grid.sky(i) for i in range(len(grid))]
+
+
+def test_axis_values_reach_the_scene(tmp_path):
+    from skyref.scene import Scene
+
+    grid = load_grid(write_grid(tmp_path / "grid.toml", GOOD_AXES + '\n"atmosphere.turbidity" = [2.0, 6.0]',
+                                GOOD_OUTPUT))
+    assert grid.shape == (3, 2, 2) and len(grid) == 12
+    spec = grid.sky(11)  # last axis fastest: indices (2, 1, 1)
+    assert spec.coordinates == {"sun.zenith_deg": 85.0, "atmosphere.ground_albedo": 0.5, "atmosphere.turbidity": 6.0}
+    scene = Scene.from_dict(spec.scene)
+    from skyref.atmosphere import turbidity
+
+    assert scene.sun.zenith_deg == 85.0 and (scene.camera.width, scene.camera.height) == (12, 6)
+    assert float(scene.atmosphere.ground_albedo(550.0)) == 0.5
+    assert turbidity(scene.atmosphere) == pytest.approx(6.0, rel=1e-6)
+
+
+def _batch_command(grid_path):
+    return [sys.executable, "-m", "skyref.cli", "batch", grid_path, "--workers", "1", "-q"]
+
+
+def _markers(directory):
+    folder = os.path.join(directory, "markers")
+    return sorted(os.listdir(folder)) if os.path.isdir(folder) else []
+
+
+def test_kill_9_then_resume_equals_an_uninterrupted_run(tmp_path):
+    """Kill a running batch with SIGKILL once some skies are finished, rerun it, and compare
+    with a run that was never interrupted: every sky once, complete, identical."""
+    import xarray as xr
+
+    from skyref.io.exr import read_sky_exr
+
+    axes = '"sun.zenith_deg" = [10.0, 40.0, 70.0, 85.0]\n"atmosphere.ground_albedo" = [0.0, 0.6]'
+    output = 'width = 16\nheight = 8\nspp = 64\npasses = 2'
+    killed = write_grid(tmp_path / "killed.toml", axes, 'directory = "killed"\n' + output)
+    clean = write_grid(tmp_path / "clean.toml", axes, 'directory = "clean"\n' + output)
+    killed_dir, clean_dir = str(tmp_path / "killed"), str(tmp_path / "clean")
+
+    process = subprocess.Popen(_batch_command(killed), start_new_session=True,
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    while len(_markers(killed_dir)) < 2 and time.monotonic() < deadline and process.poll() is None:
+        time.sleep(0.05)
+    os.killpg(process.pid, signal.SIGKILL)
+    process.wait()
+    finished_before = {name: open(os.path.join(killed_dir, "markers", name)).read()
+                       for name in _markers(killed_dir)}
+    assert 2 <= len(finished_before) < 8, "the kill must land mid-run"
+
+    assert subprocess.run(_batch_command(killed), capture_output=True).returncode == 0
+    assert subprocess.run(_batch_command(clean), capture_output=True).returncode == 0
+
+    # Skies finished before the kill were skipped (their markers are untouched) ...
+    for name, text in finished_before.items():
+        assert open(os.path.join(killed_dir, "markers", name)).read() == text
+    # ... every sky exists exactly once, no temporary files are left ...
+    assert _markers(killed_dir) == _markers(clean_dir) == [f"sky-{i}.json" for i in range(8)]
+    assert sorted(os.listdir(os.path.join(killed_dir, "skies"))) == [f"sky-{i}.exr" for i in range(8)]
+    manifest = json.load(open(os.path.join(killed_dir, "manifest.json")))
+    assert manifest["skies_finished"] == manifest["skies_total"] == 8
+    # ... and the data equal the uninterrupted run's, in the EXRs and in the dataset.
+    killed_data = xr.open_zarr(os.path.join(killed_dir, "dataset.zarr")).load()
+    clean_data = xr.open_zarr(os.path.join(clean_dir, "dataset.zarr")).load()
+    for i in range(8):
+        a = read_sky_exr(os.path.join(killed_dir, "skies", f"sky-{i}.exr"))
+        b = read_sky_exr(os.path.join(clean_dir, "skies", f"sky-{i}.exr"))
+        np.testing.assert_array_equal(a.radiance, b.radiance)
+        np.testing.assert_array_equal(a.standard_error, b.standard_error)
+        zenith, albedo = divmod(i, 2)
+        np.testing.assert_array_equal(killed_data.radiance.values[zenith, albedo], a.radiance)
+    np.testing.assert_array_equal(killed_data.radiance.values, clean_data.radiance.values)
+    assert np.all(np.isfinite(killed_data.radiance.values))  # every sky was written
+
+
+def test_a_directory_holding_another_grid_is_refused(tmp_path):
+    from skyref.batch import run_batch
+    from skyref.batch.store import BatchStore
+
+    grid = load_grid(write_grid(tmp_path / "grid.toml", GOOD_AXES, GOOD_OUTPUT))
+    BatchStore(grid).check_writable()
+    BatchStore(grid).prepare(grid.validate())
+    other = load_grid(write_grid(tmp_path / "grid.toml", GOOD_AXES, GOOD_OUTPUT.replace("spp = 8", "spp = 16")))
+    with pytest.raises(ParameterError, match="different grid"):
+        run_batch(other, workers=1, progress=False)
+
+
+def test_rgb_dataset_holds_the_colorimetric_rgb_of_each_exr(tmp_path):
+    import xarray as xr
+
+    from skyref.batch import run_batch
+    from skyref.io.exr import read_sky_exr
+
+    grid = load_grid(write_grid(tmp_path / "grid.toml", '"sun.zenith_deg" = [30.0, 60.0]',
+                                'directory = "rgb"\nformat = "rgb"\nwidth = 8\nheight = 4\nspp = 8\npasses = 2'))
+    manifest = run_batch(grid, workers=1, progress=False, log=lambda *_: None)
+    assert manifest["skies_finished"] == 2 and not manifest["failed"]
+    data = xr.open_zarr(str(tmp_path / "rgb" / "dataset.zarr")).load()
+    assert list(data.channel.values) == ["R", "G", "B"]
+    for i, marker in enumerate(manifest["skies"]):
+        sky = read_sky_exr(tmp_path / "rgb" / marker["exr"])
+        np.testing.assert_allclose(data.rgb.values[i], sky.rgb(), rtol=1e-5, atol=1e-6)
+        assert data.spp.values[i] == marker["spp"] == 8
+
+
+def _synthetic_sky(radiance, standard_error, spp):
+    from skyref.sky import Sky
+
+    shape = np.shape(radiance)
+    return Sky(radiance=np.asarray(radiance, np.float32), standard_error=np.asarray(standard_error, np.float32),
+               wavelengths_nm=np.array([550.0]), directions=np.zeros(shape[:2] + (3,)),
+               orders={"single": np.asarray(radiance, np.float32)},
+               metadata={"spp": spp, "passes": 2, "seed": 0, "render_time_s": 1.0, "samples_per_second": 10.0})
+
+
+def test_combining_renders_weights_by_samples():
+    from skyref.render import combine_skies
+
+    a = _synthetic_sky([[[1.0]]], [[[0.4]]], spp=10)
+    b = _synthetic_sky([[[4.0]]], [[[0.1]]], spp=30)
+    both = combine_skies([a, b])
+    # mean = (10 * 1 + 30 * 4) / 40; variance of a weighted mean of independent estimates
+    assert both.radiance[0, 0, 0] == pytest.approx(3.25)
+    assert both.standard_error[0, 0, 0] == pytest.approx(np.hypot(0.25 * 0.4, 0.75 * 0.1))
+    assert both.metadata["spp"] == 40 and both.orders["single"][0, 0, 0] == pytest.approx(3.25)
+
+
+def test_render_to_error_reaches_its_target_with_honest_error_bars(mi):
+    """A target-error render stops at the target, and its radiance agrees with an independent
+    high-sample render within its stated standard error (chi-square of the z-scores)."""
+    from skyref.render import relative_error_percentile, render_sky, render_to_error
+    from skyref.scene import Camera, RenderSettings, Scene, Sun
+
+    scene = Scene(sun=Sun(zenith_deg=40.0), camera=Camera(width=8, height=4), wavelengths="rgb",
+                  render=RenderSettings(passes=4))
+    sky = render_to_error(scene, 0.05, seeds=list(range(11, 19)), max_spp=8192)
+    assert relative_error_percentile(sky) <= 0.05
+    assert sky.metadata["spp"] < 8192 and len(sky.metadata["seed"]) >= 2
+    reference = render_sky(scene, spp=4096, passes=8, seed=99)
+    z = (sky.radiance - reference.radiance) / np.hypot(sky.standard_error, reference.standard_error)
+    z = z[np.isfinite(z)]
+    assert z.size == 8 * 4 * 3
+    assert 0.5 < np.mean(z ** 2) < 1.8, np.mean(z ** 2)
