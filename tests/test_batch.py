@@ -223,3 +223,24 @@ def test_render_to_error_reaches_its_target_with_honest_error_bars(mi):
     z = z[np.isfinite(z)]
     assert z.size == 8 * 4 * 3
     assert 0.5 < np.mean(z ** 2) < 1.8, np.mean(z ** 2)
+
+
+def test_runs_on_a_given_dask_scheduler(tmp_path):
+    """--scheduler: the same grid on an external dask cluster gives the same skies."""
+    from dask.distributed import LocalCluster
+
+    from skyref.batch import run_batch
+    from skyref.io.exr import read_sky_exr
+
+    axes = '"sun.zenith_deg" = [30.0, 70.0]'
+    output = 'width = 8\nheight = 4\nspp = 8\npasses = 2'
+    external = load_grid(write_grid(tmp_path / "a.toml", axes, 'directory = "external"\n' + output))
+    local = load_grid(write_grid(tmp_path / "b.toml", axes, 'directory = "local"\n' + output))
+    with LocalCluster(n_workers=1, threads_per_worker=1, dashboard_address=None) as cluster:
+        manifest = run_batch(external, scheduler=cluster.scheduler_address, progress=False, log=lambda *_: None)
+    assert manifest["skies_finished"] == 2 and not manifest["failed"]
+    run_batch(local, workers=1, progress=False, log=lambda *_: None)
+    for i in range(2):
+        a = read_sky_exr(tmp_path / "external" / "skies" / f"sky-{i}.exr")
+        b = read_sky_exr(tmp_path / "local" / "skies" / f"sky-{i}.exr")
+        np.testing.assert_array_equal(a.radiance, b.radiance)
