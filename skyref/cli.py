@@ -133,6 +133,44 @@ def cmd_batch(args) -> int:
     return 1 if manifest["failed"] else 0
 
 
+def _option_value(text: str):
+    """``NAME=VALUE`` -> (NAME, VALUE parsed as a TOML value, else the string)."""
+    import tomllib
+
+    name, sep, value = text.partition("=")
+    if not sep or not name:
+        raise ParameterError("--option", text, "NAME=VALUE, e.g. scattering_orders=8", "not NAME=VALUE")
+    try:
+        return name.strip(), tomllib.loads(f"v = {value}")["v"]
+    except tomllib.TOMLDecodeError:
+        return name.strip(), value
+
+
+def cmd_audit(args) -> int:
+    import os
+
+    from skyref.audit.audit import audit, summary_table, write_report
+    from skyref.lut import lut_method, method_class
+    from skyref.scene import load_scene
+
+    scene = load_scene(args.scene)
+    options = dict(_option_value(o) for o in args.option or [])
+    if args.tables:
+        arrays = dict(np.load(args.tables))
+        method = method_class(args.method).from_tables(scene.atmosphere, scene.wavelengths_nm, **arrays, **options)
+    else:
+        method = lut_method(args.method, scene.atmosphere, scene.wavelengths_nm, **options)
+    directory = args.out or os.path.join("out", "audit", f"{args.method}-{scene.name}")
+    _check_output(os.path.join(directory, "report.md"), ".md", "--out")
+    result = audit(method, scene, max_spp=args.max_spp, cache_dir=os.path.join("out", "audit", "ground-truth"),
+                   log=(lambda *_: None) if args.quiet else print)
+    path = write_report(result, directory)
+    print("\n".join(summary_table(result)))
+    print(f"precompute {result.precompute_s:.2f} s, lookup {1e9 * result.lookup_s_per_direction:.0f} ns/direction; "
+          f"report: {path}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="skyref", description="Reference skies: a spectral path tracer "
                                      "for planetary atmospheres and the tools that use it as ground truth.")
@@ -165,6 +203,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--dry-run", action="store_true", help="check the grid and print its size; render nothing")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.set_defaults(run=cmd_batch)
+
+    p = sub.add_parser("audit", help="audit a LUT method against the ground truth on a scene")
+    p.add_argument("--method", required=True, help="bruneton2017, elek2009 or hillaire2020")
+    p.add_argument("--scene", required=True, help="scene TOML file (atmosphere, sun, observer, camera, wavelengths)")
+    p.add_argument("--option", action="append", metavar="NAME=VALUE",
+                   help="a method option, e.g. scattering_orders=8 or precision=float16 (repeatable)")
+    p.add_argument("--tables", help="audit tables computed elsewhere: an .npz of arrays in the method's "
+                   "texture layout (bruneton2017)")
+    p.add_argument("--max-spp", type=int, default=16384, help="ground-truth sample budget per pixel")
+    p.add_argument("-o", "--out", help="report directory (default out/audit/METHOD-SCENE)")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress messages")
+    p.set_defaults(run=cmd_audit)
 
     p = sub.add_parser("info", help="versions, libLLVM, Mitsuba variants, presets")
     p.set_defaults(run=cmd_info)

@@ -82,7 +82,7 @@ def render_sky(scene, spp: int | None = None, passes: int | None = None, seed: i
     settings = RenderSettings(spp=scene.render.spp if spp is None else spp,
                               passes=scene.render.passes if passes is None else passes,
                               seed=scene.render.seed if seed is None else seed,
-                              max_depth=scene.render.max_depth)
+                              max_depth=scene.render.max_depth, pixel_sampling=scene.render.pixel_sampling)
     if settings.spp < settings.passes:
         raise ParameterError("spp", settings.spp, f">= passes ({settings.passes})", "too few samples")
     spp_per_pass = settings.spp // settings.passes
@@ -108,7 +108,8 @@ def render_sky(scene, spp: int | None = None, passes: int | None = None, seed: i
         for c, chunk_spp in enumerate(chunks):
             # Distinct (seed, pass, chunk) give distinct sampler seeds; the sampler takes 32 bits.
             seed_value = ((settings.seed * settings.passes + p) * len(chunks) + c) % (1 << 32)
-            image = integrator.render_orders(sensor, seed=seed_value, spp=chunk_spp).numpy()
+            image = integrator.render_orders(sensor, seed=seed_value, spp=chunk_spp,
+                                             pixel_centres=settings.pixel_sampling == "centre").numpy()
             total = image * chunk_spp if total is None else total + image * chunk_spp
             if bar is not None:
                 bar.update(chunk_spp)

@@ -9,3 +9,25 @@ Shared pieces: :mod:`skyref.lut.table` (GPU-texture lookups, float16/float32 sto
 :mod:`skyref.lut.planet` (r, mu ray geometry), :mod:`skyref.lut.transmittance` (Bruneton's
 transmittance table, also Hillaire's).
 """
+
+from __future__ import annotations
+
+import importlib
+
+from skyref.atmosphere.validation import check_choice
+
+#: name -> (module, class) of every LUT method.
+METHODS = {"bruneton2017": ("skyref.lut.bruneton", "Bruneton2017"),
+           "elek2009": ("skyref.lut.elek", "Elek2009"),
+           "hillaire2020": ("skyref.lut.hillaire", "Hillaire2020")}
+
+
+def method_class(name: str):
+    module, cls = METHODS[check_choice("method", name, tuple(METHODS))]
+    return getattr(importlib.import_module(module), cls)
+
+
+def lut_method(name: str, atmosphere, wavelengths_nm="rgb", **options):
+    """The LUT method ``name`` (one of :data:`METHODS`) for ``atmosphere``, not yet precomputed;
+    ``options`` are the method's own (resolutions, orders, precision, ...)."""
+    return method_class(name)(atmosphere, wavelengths_nm, **options)

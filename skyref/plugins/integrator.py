@@ -205,12 +205,14 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
 
     # --- rendering ----------------------------------------------------------------------------
 
-    def render_orders(self, sensor, seed: int, spp: int) -> mi.TensorXf:
+    def render_orders(self, sensor, seed: int, spp: int, pixel_centres: bool = False) -> mi.TensorXf:
         """Render one pass through a Mitsuba sensor: a tensor (H, W, 4, N) of radiance per pixel,
-        scattering order (``ORDER_NAMES``) and grid wavelength, W m^-2 sr^-1 nm^-1."""
+        scattering order (``ORDER_NAMES``) and grid wavelength, W m^-2 sr^-1 nm^-1. Samples
+        cover each pixel uniformly, or look along its centre only (``pixel_centres``)."""
         width, height = (int(x) for x in sensor.film().crop_size())
         sampler, pixel = self._wavefront(seed, width * height, spp)
-        position = mi.Vector2f(mi.Float(pixel % width), mi.Float(pixel // width)) + sampler.next_2d()
+        offset = mi.Vector2f(0.5) if pixel_centres else sampler.next_2d()
+        position = mi.Vector2f(mi.Float(pixel % width), mi.Float(pixel // width)) + offset
         film_uv = position * mi.Vector2f(1.0 / width, 1.0 / height)
         ray, weight = sensor.sample_ray(time=0.0, sample1=sampler.next_1d(), sample2=film_uv,
                                         sample3=sampler.next_2d(), active=True)

@@ -1,0 +1,205 @@
+"""One audit: a method against the ground truth on one scene, and its report.
+
+The method sees exactly what the path tracer sees: the scene's atmosphere, wavelengths,
+observer altitude, sun direction and the pixel-centre directions of its camera (the ground
+truth samples only those directions, not the pixels' areas). Both skies exclude
+the solar disk (the path tracer's ``sun_direct`` layer is removed). The ground truth is refined
+(4x the samples per step) until the luminance RMS error of every region is resolved
+(:data:`skyref.audit.metrics.NOISE_RATIO`), or ``max_spp`` is reached; the report marks every
+statistic that remains noise-limited.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from skyref.atmosphere.validation import check_number
+from skyref.audit.groundtruth import ground_truth
+from skyref.audit.metrics import METRICS, NOISE_RATIO, STATISTICS, error_maps, region_statistics
+from skyref.audit.regions import REGIONS, region_masks
+
+#: Relative error target of the first ground-truth render (95th percentile of SE / radiance).
+INITIAL_TARGET = 0.02
+#: Smallest target the refinement goes down to.
+FINEST_TARGET = 0.0025
+
+
+@dataclass
+class AuditResult:
+    method: str
+    options: dict
+    scene: object
+    radiance: np.ndarray          # (H, W, N) the method's, W m^-2 sr^-1 nm^-1
+    truth: object                 # the ground-truth Sky (solar disk included in its layers)
+    truth_radiance: np.ndarray    # (H, W, N) ground truth without the solar disk
+    maps: object                  # skyref.audit.metrics.ErrorMaps
+    statistics: dict              # region -> metric -> statistics (see region_statistics)
+    precompute_s: float
+    lookup_s_per_direction: float
+
+    def summary(self) -> dict:
+        """A JSON-ready digest: timings, ground-truth samples and the statistics."""
+        return {"method": self.method, "options": self.options, "scene": self.scene.name,
+                "precompute_s": self.precompute_s, "lookup_s_per_direction": self.lookup_s_per_direction,
+                "ground_truth_spp": self.truth.metadata.get("spp"), "statistics": self.statistics}
+
+
+def all_resolved(statistics: dict) -> bool:
+    """True when every region's luminance RMS error is resolved (the refinement criterion)."""
+    return all(row["luminance"]["resolved_rms"] for row in statistics.values())
+
+
+def audit(method, scene, max_spp: int = 16384, cache_dir: str | None = None, log=print) -> AuditResult:
+    """Audit ``method`` (a constructed :class:`skyref.lut.base.LutMethod` or any object with
+    ``precompute()`` and ``radiance(directions, sun_direction, observer_altitude_m)``, on
+    ``scene``'s atmosphere and wavelengths) against the ground truth of ``scene``."""
+    check_number("max_spp", max_spp, 16, 1 << 20)
+    if not np.allclose(method.wavelengths_nm, scene.wavelengths_nm):
+        from skyref.errors import ParameterError
+
+        raise ParameterError("method.wavelengths_nm", list(method.wavelengths_nm),
+                             f"the scene's wavelengths {list(scene.wavelengths_nm)}", "mismatch")
+    # Methods give radiance along exact directions: the ground truth looks along pixel centres.
+    scene = scene.replace(render=dataclasses.replace(scene.render, pixel_sampling="centre"))
+    log(f"audit {method.name}: precomputing")
+    precompute_s = method.precompute()
+    sun = scene.sun.direction
+    altitude = scene.observer.altitude_m
+    target = INITIAL_TARGET
+    while True:
+        log(f"audit {method.name}: ground truth to {100 * target:.2g}% (95th percentile of standard error)")
+        truth = ground_truth(scene, target, max_spp, cache_dir)
+        directions = truth.directions.reshape(-1, 3)
+        finite = np.all(np.isfinite(directions), axis=1)
+        radiance = np.full((directions.shape[0], len(scene.wavelengths_nm)), np.nan)
+        start = time.perf_counter()
+        radiance[finite] = method.radiance(directions[finite], sun, altitude)
+        lookup_s = (time.perf_counter() - start) / max(int(finite.sum()), 1)
+        radiance = radiance.reshape(truth.radiance.shape)
+        truth_radiance = truth.radiance - truth.orders.get("sun_direct", 0.0)
+        maps = error_maps(radiance, truth_radiance, truth.standard_error, scene.wavelengths_nm)
+        masks = region_masks(truth.directions, sun, scene.atmosphere.bottom_radius_m, altitude)
+        statistics = region_statistics(maps, masks)
+        if all_resolved(statistics) or target <= FINEST_TARGET or truth.metadata["spp"] >= max_spp:
+            break
+        target /= 2.0
+    options = getattr(method, "options", {})
+    return AuditResult(method=method.name, options=options, scene=scene, radiance=radiance, truth=truth,
+                       truth_radiance=truth_radiance, maps=maps, statistics=statistics,
+                       precompute_s=precompute_s, lookup_s_per_direction=lookup_s)
+
+
+# --- reporting -----------------------------------------------------------------------------
+
+_METRIC_LABELS = {"luminance": "luminance rel. error", "spectral": "spectral RMS rel. error",
+                  "delta_e": "CIEDE2000 (absolute)"}
+
+
+def _format(metric, value):
+    return f"{value:.2f}" if metric == "delta_e" else f"{100 * value:.2f}%"
+
+
+def summary_table(result: AuditResult) -> list[str]:
+    """Markdown rows: per region and metric, mean / RMS / p95 / max, each with the truth's
+    noise in parentheses and * where that noise exceeds 1/NOISE_RATIO of the value."""
+    lines = ["| region | pixels | metric | mean (noise) | RMS (noise) | p95 (noise) | max (noise) |",
+             "|---|---:|---|---:|---:|---:|---:|"]
+    for region in REGIONS:
+        row = result.statistics.get(region)
+        if row is None:
+            continue
+        for metric in METRICS:
+            entry = row[metric]
+            cells = [f"{_format(metric, entry[s])} ({_format(metric, entry['noise_' + s])})"
+                     + ("" if entry[f"resolved_{s}"] else " *") for s in STATISTICS]
+            lines.append(f"| {region} | {row['pixels']} | {_METRIC_LABELS[metric]} | " + " | ".join(cells) + " |")
+    return lines
+
+
+def write_report(result: AuditResult, directory: str) -> str:
+    """Write ``report.md``, ``summary.json``, PNG plots and ``error_maps.exr`` into
+    ``directory`` (each file atomically); returns the report's path."""
+    from skyref.io.atomic import atomic_write
+
+    os.makedirs(directory, exist_ok=True)
+    _write_plots(result, directory)
+    _write_error_exr(result, os.path.join(directory, "error_maps.exr"))
+    with atomic_write(os.path.join(directory, "summary.json")) as f:
+        json.dump(result.summary(), f, indent=1, default=float)
+    truth_meta = result.truth.metadata
+    lines = [f"# Audit: {result.method} on {result.scene.name or 'scene'}", "",
+             f"- method options: `{json.dumps(result.options, default=str)}`",
+             f"- precompute {result.precompute_s:.2f} s; lookup {1e9 * result.lookup_s_per_direction:.0f} ns per "
+             f"direction ({len(result.scene.wavelengths_nm)} wavelengths, Dr.Jit {truth_meta.get('variant', '')}, "
+             "double precision)",
+             f"- ground truth: skyref path tracer, {truth_meta.get('spp')} spp; noise in parentheses is the "
+             f"ground truth's own on the same statistic; * marks statistics whose noise exceeds 1/{NOISE_RATIO:g} "
+             "of the error (not resolved)",
+             "- CIEDE2000 on an absolute basis (one white for both: the truth's brightest sky pixel); the solar "
+             "disk is excluded from both skies", "",
+             *summary_table(result), "",
+             "![method, ground truth](images.png)", "", "![errors](errors.png)", ""]
+    path = os.path.join(directory, "report.md")
+    with atomic_write(path) as f:
+        f.write("\n".join(lines))
+    return path
+
+
+def _write_plots(result: AuditResult, directory: str):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from skyref.color import default_exposure, spectral_to_linear_srgb, tonemap_srgb8
+    from skyref.io.atomic import atomic_path
+
+    wl = result.scene.wavelengths_nm
+    rgb_truth = spectral_to_linear_srgb(result.truth_radiance, wl)
+    rgb_method = spectral_to_linear_srgb(np.nan_to_num(result.radiance), wl)
+    exposure = default_exposure(rgb_truth)
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.2), constrained_layout=True)
+    for ax, image, title in zip(axes, (rgb_method, rgb_truth), (result.method, "ground truth (skyref)")):
+        ax.imshow(tonemap_srgb8(image, exposure))
+        ax.set_title(title)
+        ax.axis("off")
+    with atomic_path(os.path.join(directory, "images.png")) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.2), constrained_layout=True)
+    lum = 100 * result.maps.error["luminance"]
+    limit = max(1.0, float(np.nanpercentile(np.abs(lum), 95))) if np.isfinite(lum).any() else 1.0
+    shown = axes[0].imshow(lum, cmap="RdBu_r", vmin=-limit, vmax=limit)
+    fig.colorbar(shown, ax=axes[0], label="relative luminance error, %")
+    axes[0].set_title("(method - truth) / truth")
+    shown = axes[1].imshow(result.maps.error["delta_e"], cmap="magma", vmin=0)
+    fig.colorbar(shown, ax=axes[1], label="CIEDE2000")
+    axes[1].set_title("colour difference")
+    for ax in axes:
+        ax.axis("off")
+    with atomic_path(os.path.join(directory, "errors.png")) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+
+
+def _write_error_exr(result: AuditResult, path: str):
+    """Error maps as float32 EXR channels: ``<metric>`` and ``noise.<metric>``."""
+    import OpenEXR
+
+    from skyref.io.atomic import atomic_path
+
+    channels = {}
+    for metric in METRICS:
+        channels[metric] = np.ascontiguousarray(result.maps.error[metric].astype(np.float32))
+        channels[f"noise.{metric}"] = np.ascontiguousarray(result.maps.noise[metric].astype(np.float32))
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage,
+              "skyref.audit": json.dumps({"method": result.method, "options": result.options}, default=str)}
+    with atomic_path(path) as tmp, OpenEXR.File(header, channels) as exr:
+        exr.write(tmp)

@@ -1,0 +1,117 @@
+"""Error maps and statistics of a sky method against the ground truth.
+
+Per pixel (all maps share the image's shape):
+
+- ``luminance``: relative luminance error (Y_method - Y_truth) / Y_truth;
+- ``spectral``: root mean square over wavelengths of the relative spectral radiance error;
+- ``delta_e``: CIEDE2000 on an *absolute* basis: both images' XYZ divided by one white, the
+  ground truth's brightest sky pixel (L* = 100 there), D65 white point — so a method that is
+  uniformly 10% too dark shows a colour difference, as it would on screen at fixed exposure.
+
+Beside each map, the ground truth's own noise on the same quantity: SE_Y / Y_truth with SE_Y
+= sum_k w_k SE_k (the luminance weights w; an upper bound, the wavelengths share paths), the RMS
+of SE_k / L_k, and the CIEDE2000 between the truth and the truth raised by one standard error.
+A statistic is *resolved* when the noise's statistic is at most 1/5 of the error's.
+
+Statistics per region (:mod:`skyref.audit.regions`): the signed mean, the noise-corrected RMS,
+the 95th percentile and the maximum of |error| (see :func:`_statistics`). Region means and
+RMS average the truth's noise down over many pixels; p95 and max do not, and are reported as
+noise-limited where they are. Pixels where the truth is black (space seen from orbit) carry no
+relative error.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from skyref.audit.regions import REGIONS
+from skyref.color import ciede2000, spectral_to_linear_srgb, xyz_matrix
+
+METRICS = ("luminance", "spectral", "delta_e")
+STATISTICS = ("mean", "rms", "p95", "max")
+#: The ground truth must be this many times less noisy than the error it measures.
+NOISE_RATIO = 5.0
+
+
+@dataclass
+class ErrorMaps:
+    """Per-pixel errors and the ground truth's noise on each (see module docstring)."""
+
+    error: dict          # metric -> (H, W)
+    noise: dict          # metric -> (H, W)
+    valid: np.ndarray    # (H, W) pixels where the truth is lit and the method finite
+
+
+def error_maps(method_radiance, truth_radiance, truth_standard_error, wavelengths_nm) -> ErrorMaps:
+    """Maps comparing ``method_radiance`` with ``truth_radiance`` (both (H, W, N), W m^-2 sr^-1
+    nm^-1, solar disk excluded from both) given the truth's standard error (H, W, N)."""
+    m = np.asarray(method_radiance, dtype=np.float64)
+    t = np.asarray(truth_radiance, dtype=np.float64)
+    se = np.asarray(truth_standard_error, dtype=np.float64)
+    weights = xyz_matrix(wavelengths_nm)[:, 1]
+    y_m, y_t, se_y = m @ weights, t @ weights, se @ np.abs(weights)
+    lit = np.isfinite(y_t) & (y_t > 1e-9 * np.nanmax(np.where(np.isfinite(y_t), y_t, 0.0), initial=0.0))
+    valid = lit & np.all(np.isfinite(m), axis=-1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        luminance = np.where(valid, (y_m - y_t) / y_t, np.nan)
+        luminance_noise = np.where(valid, se_y / y_t, np.nan)
+        positive = t > 0
+        relative = np.where(positive, (m - t) / t, 0.0)
+        relative_noise = np.where(positive, se / t, 0.0)
+        count = np.maximum(positive.sum(axis=-1), 1)
+        spectral = np.where(valid, np.sqrt((relative ** 2).sum(axis=-1) / count), np.nan)
+        spectral_noise = np.where(valid, np.sqrt((relative_noise ** 2).sum(axis=-1) / count), np.nan)
+    rgb_t = spectral_to_linear_srgb(np.where(np.isfinite(t), t, 0.0), wavelengths_nm)
+    rgb_m = spectral_to_linear_srgb(np.where(np.isfinite(m), m, 0.0), wavelengths_nm)
+    rgb_noisy = spectral_to_linear_srgb(np.where(np.isfinite(t), t + se, 0.0), wavelengths_nm)
+    white = float(np.max(np.where(valid, y_t, 0.0), initial=0.0)) or 1.0
+    delta_e = np.where(valid, ciede2000(rgb_m, rgb_t, white), np.nan)
+    delta_e_noise = np.where(valid, ciede2000(rgb_noisy, rgb_t, white), np.nan)
+    return ErrorMaps(error={"luminance": luminance, "spectral": spectral, "delta_e": delta_e},
+                     noise={"luminance": luminance_noise, "spectral": spectral_noise, "delta_e": delta_e_noise},
+                     valid=valid)
+
+
+def _statistics(error, noise) -> dict:
+    """Statistics of one metric over a region's pixels, each beside the ground truth's noise on
+    it. ``mean`` is the signed mean (its noise: sqrt(sum n_i^2) / n); ``rms`` is the root mean
+    square with the truth's noise variance removed, sqrt(max(0, mean(e^2) - mean(n^2))) (its
+    noise: the standard error of that estimate, from the delta method); ``p95`` and ``max`` are
+    of |e| per pixel, their noise the same statistic of the per-pixel noise n."""
+    keep = np.isfinite(error) & np.isfinite(noise)
+    e, n = error[keep], noise[keep]
+    if e.size == 0:
+        return None
+    count = e.size
+    mean_square = float(np.mean(e * e) - np.mean(n * n))
+    rms = float(np.sqrt(max(mean_square, 0.0)))
+    ms_noise = float(np.sqrt(np.sum(4.0 * e * e * n * n + 2.0 * n ** 4)) / count)
+    a = np.abs(e)
+    return {"mean": float(e.mean()), "noise_mean": float(np.sqrt(np.sum(n * n)) / count),
+            "rms": rms, "noise_rms": ms_noise / max(2.0 * rms, float(np.sqrt(ms_noise))),
+            "p95": float(np.percentile(a, 95.0)), "noise_p95": float(np.percentile(n, 95.0)),
+            "max": float(a.max()), "noise_max": float(n.max())}
+
+
+def region_statistics(maps: ErrorMaps, masks: dict) -> dict:
+    """``{region: {"pixels": n, metric: {stat: value, "noise_" + stat: value, "resolved_" + stat:
+    bool}}}`` for every region with at least one valid pixel; a statistic is resolved when its
+    noise is at most 1/NOISE_RATIO of its magnitude. CIEDE2000 is not signed: its ``mean`` is
+    the mean difference and its noise the mean of the noise map."""
+    table = {}
+    for region in REGIONS:
+        mask = masks[region] & maps.valid
+        if not mask.any():
+            continue
+        row = {"pixels": int(mask.sum())}
+        for metric in METRICS:
+            entry = _statistics(maps.error[metric][mask], maps.noise[metric][mask])
+            if metric == "delta_e":
+                entry["noise_mean"] = float(np.mean(maps.noise[metric][mask]))
+            for stat in STATISTICS:
+                entry[f"resolved_{stat}"] = bool(entry[f"noise_{stat}"] * NOISE_RATIO <= abs(entry[stat]))
+            row[metric] = entry
+        table[region] = row
+    return table
