@@ -55,6 +55,26 @@ def all_resolved(statistics: dict) -> bool:
     return all(row["luminance"]["resolved_rms"] for row in statistics.values())
 
 
+def compare(method, truth, scene) -> dict:
+    """Evaluate a precomputed ``method`` along the pixel directions of the ground-truth sky
+    ``truth`` of ``scene`` and compare: returns radiance, truth radiance (solar disk removed),
+    error maps, region statistics and the lookup time per direction (s)."""
+    sun = scene.sun.direction
+    altitude = scene.observer.altitude_m
+    directions = truth.directions.reshape(-1, 3)
+    finite = np.all(np.isfinite(directions), axis=1)
+    radiance = np.full((directions.shape[0], len(scene.wavelengths_nm)), np.nan)
+    start = time.perf_counter()
+    radiance[finite] = method.radiance(directions[finite], sun, altitude)
+    lookup_s = (time.perf_counter() - start) / max(int(finite.sum()), 1)
+    radiance = radiance.reshape(truth.radiance.shape)
+    truth_radiance = truth.radiance - truth.orders.get("sun_direct", 0.0)
+    maps = error_maps(radiance, truth_radiance, truth.standard_error, scene.wavelengths_nm)
+    masks = region_masks(truth.directions, sun, scene.atmosphere.bottom_radius_m, altitude)
+    return {"radiance": radiance, "truth_radiance": truth_radiance, "maps": maps,
+            "statistics": region_statistics(maps, masks), "lookup_s_per_direction": lookup_s}
+
+
 def audit(method, scene, max_spp: int = 16384, cache_dir: str | None = None, log=print) -> AuditResult:
     """Audit ``method`` (a constructed :class:`skyref.lut.base.LutMethod` or any object with
     ``precompute()`` and ``radiance(directions, sun_direction, observer_altitude_m)``, on
@@ -69,30 +89,18 @@ def audit(method, scene, max_spp: int = 16384, cache_dir: str | None = None, log
     scene = scene.replace(render=dataclasses.replace(scene.render, pixel_sampling="centre"))
     log(f"audit {method.name}: precomputing")
     precompute_s = method.precompute()
-    sun = scene.sun.direction
-    altitude = scene.observer.altitude_m
     target = INITIAL_TARGET
     while True:
         log(f"audit {method.name}: ground truth to {100 * target:.2g}% (95th percentile of standard error)")
         truth = ground_truth(scene, target, max_spp, cache_dir)
-        directions = truth.directions.reshape(-1, 3)
-        finite = np.all(np.isfinite(directions), axis=1)
-        radiance = np.full((directions.shape[0], len(scene.wavelengths_nm)), np.nan)
-        start = time.perf_counter()
-        radiance[finite] = method.radiance(directions[finite], sun, altitude)
-        lookup_s = (time.perf_counter() - start) / max(int(finite.sum()), 1)
-        radiance = radiance.reshape(truth.radiance.shape)
-        truth_radiance = truth.radiance - truth.orders.get("sun_direct", 0.0)
-        maps = error_maps(radiance, truth_radiance, truth.standard_error, scene.wavelengths_nm)
-        masks = region_masks(truth.directions, sun, scene.atmosphere.bottom_radius_m, altitude)
-        statistics = region_statistics(maps, masks)
-        if all_resolved(statistics) or target <= FINEST_TARGET or truth.metadata["spp"] >= max_spp:
+        found = compare(method, truth, scene)
+        if all_resolved(found["statistics"]) or target <= FINEST_TARGET or truth.metadata["spp"] >= max_spp:
             break
         target /= 2.0
-    options = getattr(method, "options", {})
-    return AuditResult(method=method.name, options=options, scene=scene, radiance=radiance, truth=truth,
-                       truth_radiance=truth_radiance, maps=maps, statistics=statistics,
-                       precompute_s=precompute_s, lookup_s_per_direction=lookup_s)
+    return AuditResult(method=method.name, options=getattr(method, "options", {}), scene=scene,
+                       radiance=found["radiance"], truth=truth, truth_radiance=found["truth_radiance"],
+                       maps=found["maps"], statistics=found["statistics"], precompute_s=precompute_s,
+                       lookup_s_per_direction=found["lookup_s_per_direction"])
 
 
 # --- reporting -----------------------------------------------------------------------------

@@ -23,7 +23,9 @@
 An axis is a path into the scene's TOML tables (``sun.zenith_deg``, ``observer.altitude_m``,
 ``atmosphere.preset``, ``atmosphere.turbidity``, ``atmosphere.ground_albedo``,
 ``atmosphere.constituents.<name>.<field>``, ...); each value replaces that entry of the base
-scene (atmosphere entries override its preset as in a scene file). Every axis value is checked
+scene (atmosphere entries override its preset as in a scene file); a value may be a whole table,
+e.g. ``atmosphere = [{preset = "bruneton2017"}, {preset = "bruneton2017", turbidity = 6.0}]``
+(the dataset labels such values by their JSON). Every axis value is checked
 by building the scene it makes, before any work starts, and errors name the axis.
 
 Skies are numbered in C order over the axes (the last axis fastest); round r of sky i (a
@@ -141,8 +143,8 @@ class Grid:
                                      + ", ".join(AXIS_TABLES), "not a sweepable entry")
             if not isinstance(values, list) or not values:
                 raise ParameterError(f"axes.{path}", values, "a non-empty list of values", "empty or not a list")
-            if any(isinstance(v, (dict, list)) for v in values):
-                raise ParameterError(f"axes.{path}", values, "a list of numbers or strings", "nested values")
+            if any(isinstance(v, list) for v in values):
+                raise ParameterError(f"axes.{path}", values, "a list of numbers, strings or tables", "nested lists")
             if len({json.dumps(v, sort_keys=True) for v in values}) != len(values):
                 raise ParameterError(f"axes.{path}", values, "distinct values", "repeated value")
 
@@ -167,6 +169,13 @@ class Grid:
         data = dict(data, camera=camera)
         data["render"] = dict(data.get("render", {}), passes=self.output.passes)
         return data
+
+    def labels(self, path: str) -> np.ndarray:
+        """Coordinate labels of an axis: its values, or their JSON where they are tables."""
+        values = self.axes[path]
+        if any(isinstance(v, dict) for v in values):
+            return np.array([json.dumps(v, sort_keys=True) for v in values])
+        return np.asarray(values)
 
     def sky_id(self, index: int) -> str:
         return f"sky-{index:0{len(str(len(self) - 1))}d}"
@@ -247,6 +256,6 @@ def load_grid(path) -> Grid:
     output = dict(data.get("output", {}))
     if "directory" not in output:
         raise ParameterError("output.directory", None, "a directory for the skies", "missing")
-    output["directory"] = os.path.join(here, str(output["directory"]))
+    output["directory"] = os.path.normpath(os.path.join(here, str(output["directory"])))
     check_fields("output", output, OutputSettings)
     return Grid(base=scene, axes=dict(data.get("axes", {})), output=OutputSettings(**output), source=path)

@@ -109,7 +109,6 @@ class BatchStore:
         import dask.array as da
         import xarray as xr
 
-        from skyref.io.atomic import atomic_path
 
         grid = self.grid
         axes = list(grid.axes)
@@ -128,7 +127,7 @@ class BatchStore:
         for name, dtype, unit in (("spp", np.float32, "samples per pixel"), ("render_time_s", np.float32, "s"),
                                   ("relative_error_p95", np.float32, "1")):
             variables[name] = (axes, da.full(shape, np.nan, dtype=dtype, chunks=ones), {"units": unit})
-        coords = {path: (path, np.asarray(values)) for path, values in grid.axes.items()}
+        coords = {path: (path, grid.labels(path)) for path in grid.axes}
         if grid.output.format == "spectral":
             coords["wavelength"] = ("wavelength", np.asarray(scene.wavelengths_nm), {"units": "nm"})
         else:
@@ -136,8 +135,8 @@ class BatchStore:
         dataset = xr.Dataset(variables, coords=coords,
                              attrs={"title": "skyref reference skies", "grid": grid.fingerprint(),
                                     "camera": json.dumps(scene.camera.to_dict())})
-        with warnings.catch_warnings():  # consolidated metadata is a zarr-python extension to v3
-            warnings.simplefilter("ignore", category=UserWarning)
+        with warnings.catch_warnings():  # consolidated metadata and fixed-length strings: zarr-python
+            warnings.simplefilter("ignore")  # extensions to v3, which xarray reads back
             dataset.to_zarr(self.dataset_path, mode="w", compute=False, zarr_format=3)
 
     # --- per sky ----------------------------------------------------------------------------
