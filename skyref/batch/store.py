@@ -109,7 +109,6 @@ class BatchStore:
         import dask.array as da
         import xarray as xr
 
-
         grid = self.grid
         axes = list(grid.axes)
         height, width = scene.camera.height, scene.camera.width
