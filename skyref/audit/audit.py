@@ -41,12 +41,14 @@ class AuditResult:
     maps: object                  # skyref.audit.metrics.ErrorMaps
     statistics: dict              # region -> metric -> statistics (see region_statistics)
     precompute_s: float
+    per_view_s: float
     lookup_s_per_direction: float
 
     def summary(self) -> dict:
         """A JSON-ready digest: timings, ground-truth samples and the statistics."""
         return {"method": self.method, "options": self.options, "scene": self.scene.name,
-                "precompute_s": self.precompute_s, "lookup_s_per_direction": self.lookup_s_per_direction,
+                "precompute_s": self.precompute_s, "per_view_s": self.per_view_s,
+                "lookup_s_per_direction": self.lookup_s_per_direction,
                 "ground_truth_spp": self.truth.metadata.get("spp"), "statistics": self.statistics}
 
 
@@ -58,12 +60,15 @@ def all_resolved(statistics: dict) -> bool:
 def compare(method, truth, scene) -> dict:
     """Evaluate a precomputed ``method`` along the pixel directions of the ground-truth sky
     ``truth`` of ``scene`` and compare: returns radiance, truth radiance (solar disk removed),
-    error maps, region statistics and the lookup time per direction (s)."""
+    error maps, region statistics, the time to build the method's per-view tables (s) and the
+    lookup time per direction (s)."""
     sun = scene.sun.direction
     altitude = scene.observer.altitude_m
     directions = truth.directions.reshape(-1, 3)
     finite = np.all(np.isfinite(directions), axis=1)
     radiance = np.full((directions.shape[0], len(scene.wavelengths_nm)), np.nan)
+    prepare = getattr(method, "prepare_view", None)
+    per_view_s = prepare(sun, altitude) if prepare is not None else 0.0
     start = time.perf_counter()
     radiance[finite] = method.radiance(directions[finite], sun, altitude)
     lookup_s = (time.perf_counter() - start) / max(int(finite.sum()), 1)
@@ -72,7 +77,8 @@ def compare(method, truth, scene) -> dict:
     maps = error_maps(radiance, truth_radiance, truth.standard_error, scene.wavelengths_nm)
     masks = region_masks(truth.directions, sun, scene.atmosphere.bottom_radius_m, altitude)
     return {"radiance": radiance, "truth_radiance": truth_radiance, "maps": maps,
-            "statistics": region_statistics(maps, masks), "lookup_s_per_direction": lookup_s}
+            "statistics": region_statistics(maps, masks), "lookup_s_per_direction": lookup_s,
+            "per_view_s": per_view_s}
 
 
 def audit(method, scene, max_spp: int = 16384, cache_dir: str | None = None, log=print) -> AuditResult:
@@ -100,7 +106,7 @@ def audit(method, scene, max_spp: int = 16384, cache_dir: str | None = None, log
     return AuditResult(method=method.name, options=getattr(method, "options", {}), scene=scene,
                        radiance=found["radiance"], truth=truth, truth_radiance=found["truth_radiance"],
                        maps=found["maps"], statistics=found["statistics"], precompute_s=precompute_s,
-                       lookup_s_per_direction=found["lookup_s_per_direction"])
+                       per_view_s=found["per_view_s"], lookup_s_per_direction=found["lookup_s_per_direction"])
 
 
 # --- reporting -----------------------------------------------------------------------------
@@ -143,7 +149,8 @@ def write_report(result: AuditResult, directory: str) -> str:
     truth_meta = result.truth.metadata
     lines = [f"# Audit: {result.method} on {result.scene.name or 'scene'}", "",
              f"- method options: `{json.dumps(result.options, default=str)}`",
-             f"- precompute {result.precompute_s:.2f} s; lookup {1e9 * result.lookup_s_per_direction:.0f} ns per "
+             f"- precompute {result.precompute_s:.2f} s; per-view tables {result.per_view_s:.3f} s; "
+             f"lookup {1e9 * result.lookup_s_per_direction:.0f} ns per "
              f"direction ({len(result.scene.wavelengths_nm)} wavelengths, Dr.Jit {truth_meta.get('variant', '')}, "
              "double precision)",
              f"- ground truth: skyref path tracer, {truth_meta.get('spp')} spp; noise in parentheses is the "

@@ -29,5 +29,8 @@ def method_class(name: str):
 
 def lut_method(name: str, atmosphere, wavelengths_nm="rgb", **options):
     """The LUT method ``name`` (one of :data:`METHODS`) for ``atmosphere``, not yet precomputed;
-    ``options`` are the method's own (resolutions, orders, precision, ...)."""
-    return method_class(name)(atmosphere, wavelengths_nm, **options)
+    ``options`` are the method's own (resolutions, orders, precision, ...) and are kept in its
+    ``options`` attribute for reports."""
+    method = method_class(name)(atmosphere, wavelengths_nm, **options)
+    method.options = dict(options)
+    return method

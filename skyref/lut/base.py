@@ -149,6 +149,22 @@ class LutMethod:
         """name -> NumPy array of every precomputed table (as stored)."""
         raise NotImplementedError
 
+    def prepare_view(self, sun_direction, observer_altitude_m: float) -> float:
+        """Build the tables that depend on the observer and the sun (a frame's work in an
+        engine: Hillaire's sky view, Elek's aerial-perspective volume); :meth:`radiance` builds
+        them itself when missing, so calling this first only separates their cost from the
+        lookups'. Returns the wall time, s."""
+        start = time.perf_counter()
+        sun = np.asarray(sun_direction, dtype=np.float64).reshape(3)
+        self._prepare_view(self.optics.bottom_radius + float(observer_altitude_m),
+                           float(sun[2] / np.linalg.norm(sun)))
+        dr.sync_thread()
+        return time.perf_counter() - start
+
+    def _prepare_view(self, r: float, mu_s: float):
+        """Per-view tables for an observer at radius ``r`` (m) with the sun at zenith cosine
+        ``mu_s``; nothing for methods whose tables are all view-independent."""
+
     # --- lookups ----------------------------------------------------------------------------
 
     def radiance(self, directions, sun_direction, observer_altitude_m: float) -> np.ndarray:
