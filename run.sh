@@ -25,6 +25,7 @@ setup() {
     local need=()
     command -v python3 >/dev/null || need+=(python3)
     python3 -c 'import venv, ensurepip' 2>/dev/null || need+=(python3-venv)
+    command -v gcc >/dev/null || need+=(gcc)  # tests compile the exported Hosek C header
     [ ${#need[@]} -eq 0 ] || apt_install "${need[@]}"
     # Dr.Jit needs libLLVM >= 17 (Debian's default 15/16 crash it): skyref._llvm decides.
     if ! python3 -m skyref._llvm; then
