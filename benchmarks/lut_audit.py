@@ -140,8 +140,9 @@ def grid_tables(grid, rows_by_method):
                          f"| {fmt('sky')} | {fmt('sky', 'p95')} | {fmt('horizon')} | {fmt('sun')} | {fmt('antisolar')} "
                          f"| {fmt('ground')} | {fmt('sky', 'p95', 'delta_e', 1.0)} |")
     lines += ["", "## Sky luminance RMS error (%) by sun zenith and observer altitude", "",
-              "`*`: not resolved (the ground truth's noise on it exceeds 1/5 of it: the true error is smaller "
-              "than the noise can show); `–`: no lit sky pixels.", ""]
+              "`*`: not resolved (the ground truth's noise on it exceeds 1/5 of it, or most of the region's "
+              "pixels were too noisy to measure: the ground truth needs more samples there); `–`: no lit sky "
+              "pixels (from 1000 km no pixel centre of the 64x32 grid falls on the limb).", ""]
     for name, rows in rows_by_method.items():
         for a, label in enumerate(labels):
             lookup = {(r["coordinates"]["observer.altitude_m"], r["coordinates"]["sun.zenith_deg"]): r

@@ -21,7 +21,8 @@ import numpy as np
 
 from skyref.atmosphere.validation import check_number
 from skyref.audit.groundtruth import ground_truth
-from skyref.audit.metrics import METRICS, NOISE_RATIO, STATISTICS, error_maps, region_statistics
+from skyref.audit.metrics import (DYNAMIC_RANGE, MAX_PIXEL_NOISE, METRICS, NOISE_RATIO, STATISTICS, error_maps,
+                                  region_statistics)
 from skyref.audit.regions import REGIONS, region_masks
 
 #: Relative error target of the first ground-truth render (95th percentile of SE / radiance).
@@ -93,8 +94,10 @@ def audit(method, scene, max_spp: int = 16384, cache_dir: str | None = None, log
                              f"the scene's wavelengths {list(scene.wavelengths_nm)}", "mismatch")
     # Methods give radiance along exact directions: the ground truth looks along pixel centres.
     scene = scene.replace(render=dataclasses.replace(scene.render, pixel_sampling="centre"))
-    log(f"audit {method.name}: precomputing")
-    precompute_s = method.precompute()
+    precompute_s = getattr(method, "precompute_seconds", None)
+    if precompute_s is None:  # not precomputed yet (tables given by a user come precomputed)
+        log(f"audit {method.name}: precomputing")
+        precompute_s = method.precompute()
     target = INITIAL_TARGET
     while True:
         log(f"audit {method.name}: ground truth to {100 * target:.2g}% (95th percentile of standard error)")
@@ -122,7 +125,7 @@ def _format(metric, value):
 def summary_table(result: AuditResult) -> list[str]:
     """Markdown rows: per region and metric, mean / RMS / p95 / max, each with the truth's
     noise in parentheses and * where that noise exceeds 1/NOISE_RATIO of the value."""
-    lines = ["| region | pixels | metric | mean (noise) | RMS (noise) | p95 (noise) | max (noise) |",
+    lines = ["| region | pixels (too noisy) | metric | mean (noise) | RMS (noise) | p95 (noise) | max (noise) |",
              "|---|---:|---|---:|---:|---:|---:|"]
     for region in REGIONS:
         row = result.statistics.get(region)
@@ -132,7 +135,8 @@ def summary_table(result: AuditResult) -> list[str]:
             entry = row[metric]
             cells = [f"{_format(metric, entry[s])} ({_format(metric, entry['noise_' + s])})"
                      + ("" if entry[f"resolved_{s}"] else " *") for s in STATISTICS]
-            lines.append(f"| {region} | {row['pixels']} | {_METRIC_LABELS[metric]} | " + " | ".join(cells) + " |")
+            lines.append(f"| {region} | {row['pixels']} ({row['unmeasured']}) | {_METRIC_LABELS[metric]} | "
+                         + " | ".join(cells) + " |")
     return lines
 
 
@@ -155,7 +159,9 @@ def write_report(result: AuditResult, directory: str) -> str:
              "double precision)",
              f"- ground truth: skyref path tracer, {truth_meta.get('spp')} spp; noise in parentheses is the "
              f"ground truth's own on the same statistic; * marks statistics whose noise exceeds 1/{NOISE_RATIO:g} "
-             "of the error (not resolved)",
+             "of the error, or whose region lost most pixels as too noisy (not resolved)",
+             f"- pixels darker than {DYNAMIC_RANGE:g} of the brightest, or whose truth is uncertain by more than "
+             f"{100 * MAX_PIXEL_NOISE:g}% (too noisy), are left out",
              "- CIEDE2000 on an absolute basis (one white for both: the truth's brightest sky pixel); the solar "
              "disk is excluded from both skies", "",
              *summary_table(result), "",

@@ -33,6 +33,13 @@ METRICS = ("luminance", "spectral", "delta_e")
 STATISTICS = ("mean", "rms", "p95", "max")
 #: The ground truth must be this many times less noisy than the error it measures.
 NOISE_RATIO = 5.0
+#: Pixels darker than this fraction of the image's brightest (solar disk excluded) carry no
+#: relative error: no exposure shows them beside the bright sky (space, the night side).
+DYNAMIC_RANGE = 1e-4
+#: Pixels whose ground-truth luminance is more uncertain than this (SE_Y / Y) are left out of the
+#: statistics: a ratio to a noisier truth is biased and its noise estimate unreliable. Their
+#: number is reported (``unmeasured``); a region that loses most of its pixels is unresolved.
+MAX_PIXEL_NOISE = 0.2
 
 
 @dataclass
@@ -41,7 +48,8 @@ class ErrorMaps:
 
     error: dict          # metric -> (H, W)
     noise: dict          # metric -> (H, W)
-    valid: np.ndarray    # (H, W) pixels where the truth is lit and the method finite
+    valid: np.ndarray    # (H, W) pixels where the truth is lit and measured and the method finite
+    lit: np.ndarray      # (H, W) pixels where the truth is lit (DYNAMIC_RANGE)
 
 
 def error_maps(method_radiance, truth_radiance, truth_standard_error, wavelengths_nm) -> ErrorMaps:
@@ -52,8 +60,11 @@ def error_maps(method_radiance, truth_radiance, truth_standard_error, wavelength
     se = np.asarray(truth_standard_error, dtype=np.float64)
     weights = xyz_matrix(wavelengths_nm)[:, 1]
     y_m, y_t, se_y = m @ weights, t @ weights, se @ np.abs(weights)
-    lit = np.isfinite(y_t) & (y_t > 1e-9 * np.nanmax(np.where(np.isfinite(y_t), y_t, 0.0), initial=0.0))
-    valid = lit & np.all(np.isfinite(m), axis=-1)
+    brightest = np.nanmax(np.where(np.isfinite(y_t), y_t, 0.0), initial=0.0)
+    lit = np.isfinite(y_t) & (y_t > DYNAMIC_RANGE * brightest)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        measured = se_y <= MAX_PIXEL_NOISE * y_t
+    valid = lit & measured & np.all(np.isfinite(m), axis=-1)
     with np.errstate(divide="ignore", invalid="ignore"):
         luminance = np.where(valid, (y_m - y_t) / y_t, np.nan)
         luminance_noise = np.where(valid, se_y / y_t, np.nan)
@@ -71,7 +82,7 @@ def error_maps(method_radiance, truth_radiance, truth_standard_error, wavelength
     delta_e_noise = np.where(valid, ciede2000(rgb_noisy, rgb_t, white), np.nan)
     return ErrorMaps(error={"luminance": luminance, "spectral": spectral, "delta_e": delta_e},
                      noise={"luminance": luminance_noise, "spectral": spectral_noise, "delta_e": delta_e_noise},
-                     valid=valid)
+                     valid=valid, lit=lit & np.all(np.isfinite(m), axis=-1))
 
 
 def _statistics(error, noise) -> dict:
@@ -96,22 +107,25 @@ def _statistics(error, noise) -> dict:
 
 
 def region_statistics(maps: ErrorMaps, masks: dict) -> dict:
-    """``{region: {"pixels": n, metric: {stat: value, "noise_" + stat: value, "resolved_" + stat:
-    bool}}}`` for every region with at least one valid pixel; a statistic is resolved when its
-    noise is at most 1/NOISE_RATIO of its magnitude. CIEDE2000 is not signed: its ``mean`` is
+    """``{region: {"pixels": n, "unmeasured": m, metric: {stat: value, "noise_" + stat: value,
+    "resolved_" + stat: bool}}}`` for every region with at least one valid pixel; a statistic is
+    resolved when its noise is at most 1/NOISE_RATIO of its magnitude and at most half of the
+    region's lit pixels were too noisy to measure. CIEDE2000 is not signed: its ``mean`` is
     the mean difference and its noise the mean of the noise map."""
     table = {}
     for region in REGIONS:
         mask = masks[region] & maps.valid
         if not mask.any():
             continue
-        row = {"pixels": int(mask.sum())}
+        unmeasured = int((masks[region] & maps.lit & ~maps.valid).sum())
+        row = {"pixels": int(mask.sum()), "unmeasured": unmeasured}
+        covered = unmeasured <= row["pixels"]
         for metric in METRICS:
             entry = _statistics(maps.error[metric][mask], maps.noise[metric][mask])
             if metric == "delta_e":
                 entry["noise_mean"] = float(np.mean(maps.noise[metric][mask]))
             for stat in STATISTICS:
-                entry[f"resolved_{stat}"] = bool(entry[f"noise_{stat}"] * NOISE_RATIO <= abs(entry[stat]))
+                entry[f"resolved_{stat}"] = covered and bool(entry[f"noise_{stat}"] * NOISE_RATIO <= abs(entry[stat]))
             row[metric] = entry
         table[region] = row
     return table
