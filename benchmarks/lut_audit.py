@@ -11,7 +11,10 @@ Per sky the methods are compared with :func:`skyref.audit.audit.compare`: lumina
 (signed mean, noise-corrected RMS, p95, max) per region, CIEDE2000 on an absolute basis, each
 beside the ground truth's own noise; statistics whose noise exceeds 1/5 of them are marked *.
 
-Usage: ``python benchmarks/lut_audit.py [--skip-sweeps]``; writes results/lut_audit.md,
+Usage: ``python benchmarks/lut_audit.py`` (everything; hours on 2 cores, Bruneton's precompute
+dominates). Parts can run separately: ``--part grid|sweeps`` and ``--methods NAME ...``; each
+part's numbers are kept in results/lut_audit/<part>_<method>.json and the report is rebuilt from
+every JSON present, so a long audit can be completed in pieces. Writes results/lut_audit.md,
 results/lut_audit.csv and results/lut_audit/*.png.
 """
 
@@ -24,7 +27,6 @@ import json
 import os
 import platform
 import sys
-import time
 
 import numpy as np
 
@@ -185,21 +187,21 @@ def plot_grid(grid, rows_by_method, path):
     plt.close(fig)
 
 
-def sweep(grid, directory, log):
+def sweep(grid, directory, name, log):
+    """The sweep points of method ``name`` (see SWEEPS) on the sweep skies."""
     skies = [s for s in truth_skies(grid, directory)
              if s[1]["atmosphere"] == grid.axes["atmosphere"][SWEEP_SKIES["atmosphere"]]
              and s[1]["observer.altitude_m"] in SWEEP_SKIES["observer.altitude_m"]
              and s[1]["sun.zenith_deg"] in SWEEP_SKIES["sun.zenith_deg"]]
     points = []
-    for name, settings in SWEEPS.items():
-        for label, options in settings:
-            rows = evaluate(name, options, skies, log)
-            points.append({"method": name, "label": label, "options": options,
-                           "precompute_s": rows[0]["precompute_s"],
-                           "lookup_ns": float(np.median([r["lookup_ns"] for r in rows])),
-                           "sky_rms": _median(rows, "sky", "luminance", "rms"),
-                           "sky_p95": _median(rows, "sky", "luminance", "p95"),
-                           "delta_e_p95": _median(rows, "sky", "delta_e", "p95")})
+    for label, options in SWEEPS[name]:
+        rows = evaluate(name, options, skies, log)
+        points.append({"method": name, "label": label, "options": options,
+                       "precompute_s": rows[0]["precompute_s"],
+                       "lookup_ns": float(np.median([r["lookup_ns"] for r in rows])),
+                       "sky_rms": _median(rows, "sky", "luminance", "rms"),
+                       "sky_p95": _median(rows, "sky", "luminance", "p95"),
+                       "delta_e_p95": _median(rows, "sky", "delta_e", "p95")})
     return points
 
 
@@ -228,38 +230,66 @@ def plot_pareto(points, path):
     plt.close(fig)
 
 
+def _json_path(part, method):
+    return os.path.join(RESULTS, "lut_audit", f"{part}_{method}.json")
+
+
+def _save(part, method, data):
+    with atomic_write(_json_path(part, method)) as f:
+        json.dump(data, f, default=float)
+
+
+def _load(part):
+    found = {}
+    for name in METHODS:
+        if os.path.exists(_json_path(part, name)):
+            with open(_json_path(part, name)) as f:
+                found[name] = json.load(f)
+    return found
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--skip-sweeps", action="store_true")
+    parser.add_argument("--part", choices=("all", "grid", "sweeps", "report"), default="all")
     parser.add_argument("--methods", nargs="*", default=list(METHODS))
     args = parser.parse_args()
     grid = load_grid(GRID)
     log = print
-    manifest = run_batch(grid, log=log)
-    if manifest["skies_finished"] != len(grid):
-        sys.exit(f"ground truth incomplete: {manifest['skies_finished']}/{len(grid)} skies; rerun to resume")
-    directory = grid.output.directory
-    started = time.perf_counter()
-    rows_by_method = {}
-    for name in args.methods:
-        log(f"{name}: the standard grid")
-        rows_by_method[name] = evaluate(name, {}, list(truth_skies(grid, directory)), log)
     os.makedirs(os.path.join(RESULTS, "lut_audit"), exist_ok=True)
-    plot_grid(grid, rows_by_method, os.path.join(RESULTS, "lut_audit", "error_vs_sun.png"))
-    points = [] if args.skip_sweeps else sweep(grid, directory, log)
+    if args.part != "report":
+        manifest = run_batch(grid, log=log)
+        if manifest["skies_finished"] != len(grid):
+            sys.exit(f"ground truth incomplete: {manifest['skies_finished']}/{len(grid)} skies; rerun to resume")
+    directory = grid.output.directory
+    for name in args.methods:
+        if args.part in ("all", "grid"):
+            log(f"{name}: the standard grid")
+            _save("grid", name, evaluate(name, {}, list(truth_skies(grid, directory)), log))
+        if args.part in ("all", "sweeps"):
+            log(f"{name}: sweeps")
+            _save("sweeps", name, sweep(grid, directory, name, log))
+    write_report(grid)
+
+
+def write_report(grid):
+    rows_by_method = _load("grid")
+    points = [p for name in METHODS for p in _load("sweeps").get(name, [])]
+    if rows_by_method:
+        plot_grid(grid, rows_by_method, os.path.join(RESULTS, "lut_audit", "error_vs_sun.png"))
     if points:
         plot_pareto(points, os.path.join(RESULTS, "lut_audit", "pareto.png"))
-
     spp = sorted({r["truth_spp"] for rows in rows_by_method.values() for r in rows})
     lines = ["# LUT audit: Bruneton 2017, Elek 2009 / Bodare–Sandberg, Hillaire 2020 vs skyref's ground truth", "",
-             f"Generated by `python benchmarks/lut_audit.py` on {datetime.date.today()} ({platform.machine()}, "
-             f"{os.cpu_count()} cores, CPU LLVM backend, double-precision lookups) in "
-             f"{(time.perf_counter() - started) / 60:.0f} min after the ground truth (`skyref batch grids/lut_audit.toml`, "
-             f"{len(grid)} skies, {', '.join(map(str, spp))} spp per pixel-centre direction).", "",
+             f"Generated by `python benchmarks/lut_audit.py` (report rebuilt {datetime.date.today()}; "
+             f"{platform.machine()}, {os.cpu_count()} cores, CPU LLVM backend, double-precision lookups) from the "
+             f"ground truth of `skyref batch grids/lut_audit.toml` ({len(grid)} skies, {', '.join(map(str, spp))} spp "
+             "per pixel-centre direction). Methods in this report: "
+             + (", ".join(rows_by_method) or "none yet") + ".", "",
              "Every method gets the same `Atmosphere`, the same 17 wavelengths (380–780 nm) and the same view "
              "directions (64x32 over the sphere) as the path tracer; the solar disk is excluded from both. "
              "Method notes: each method's module docstring (skyref/lut/*.py) states what its paper leaves open "
-             "and what was chosen.", "",
+             "and what was chosen. Per view: the tables a frame rebuilds when the observer or sun moves "
+             "(Hillaire's sky view, Elek's aerial-perspective volume).", "",
              *grid_tables(grid, rows_by_method), "![error vs sun zenith](lut_audit/error_vs_sun.png)", ""]
     if points:
         lines += ["## Sweeps: speed against error", "",
@@ -285,7 +315,7 @@ def main():
                                          r["coordinates"]["observer.altitude_m"], r["coordinates"]["sun.zenith_deg"],
                                          region, metric, e["mean"], e["rms"], e["p95"], e["max"], e["noise_rms"],
                                          e["noise_p95"], r["precompute_s"], r["lookup_ns"]])
-    print("\n".join(lines[:20]))
+    print("\n".join(lines[:22]))
 
 
 if __name__ == "__main__":
