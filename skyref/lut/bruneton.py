@@ -670,9 +670,7 @@ class Bruneton2017(LutMethod):
         # A TransmittanceTable for its parametrization and lookups, built with one integration
         # interval since its values are replaced by the given ones.
         method.transmittance = TransmittanceTable(method.optics, method.transmittance_width,
-                                                  method.transmittance_height, 1, "float32")
-        method.transmittance.table = Table(arrays["transmittance"], arrays["transmittance"].shape[:2], channels,
-                                           "float32")
+                                                  method.transmittance_height, values=arrays["transmittance"])
         method.scattering = Table(arrays["scattering"], (r_size, mu_size, width), stored, precision)
         method.single_mie = None if combined else Table(arrays["single_mie"], (r_size, mu_size, width), channels,
                                                         precision)

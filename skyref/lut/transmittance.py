@@ -28,13 +28,18 @@ class TransmittanceTable:
     (:class:`skyref.lut.base.LutOptics`)."""
 
     def __init__(self, optics, width: int = 256, height: int = 64, integration_samples: int = 500,
-                 precision: str = "float32"):
+                 precision: str = "float32", values=None):
+        """Integrate the table, or, with ``values`` (array [height][width][channels], e.g. from
+        another implementation), only wrap them in this parametrization's lookups."""
         self.optics = optics
         self.width, self.height = int(width), int(height)
         self.integration_samples = int(integration_samples)
         R, Rt = optics.bottom_radius, optics.top_radius
         self.horizon_distance = float(np.sqrt(Rt * Rt - R * R))
         channels = len(optics.wavelengths_nm)
+        if values is not None:
+            self.table = Table(values, (self.height, self.width), channels, precision)
+            return
         lane = dr.arange(mi.UInt32, self.width * self.height * channels)
         channel = lane % channels
         cell = lane // channels
