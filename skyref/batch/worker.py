@@ -20,7 +20,7 @@ def render_and_store(task: dict) -> dict:
     from skyref.render import relative_error_percentile, render_sky, render_to_error
     from skyref.scene import Scene
 
-    start = time.perf_counter()
+    start, start_cpu = time.perf_counter(), time.process_time()
     if task["drjit_threads"]:
         import drjit as dr
 
@@ -55,6 +55,7 @@ def render_and_store(task: dict) -> dict:
               "exr_bytes": os.path.getsize(exr_path), "spp": meta["spp"], "seed": meta["seed"],
               "relative_error_p95": meta["relative_error_p95"], "render_time_s": meta["render_time_s"],
               "task_time_s": time.perf_counter() - start, "variant": meta["variant"],
+              "task_cpu_s": time.process_time() - start_cpu,
               "worker_peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
               "finished_at": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
     store.write_marker(spec.sky_id, marker)
