@@ -344,3 +344,33 @@ def test_missing_and_malformed_scene_file(tmp_path):
     path.write_text("[atmosphere\npreset = 1\n")
     with raises_named("scene"):
         load_scene(path)
+
+
+def test_integer_checks_name_the_entry():
+    from skyref.atmosphere.validation import check_int, check_int_tuple
+    from skyref.errors import ParameterError
+
+    assert check_int("n", 4, 2, 8, even=True) == 4
+    for bad, problem in ((9, "out of range"), (3, "odd"), (4.0, "not an integer"), (True, "not an integer")):
+        with pytest.raises(ParameterError, match=problem):
+            check_int("n", bad, 2, 8, even=True)
+    assert check_int_tuple("size", [32, 128, 32], 3, 2, 1024, even_axes=(1,)) == (32, 128, 32)
+    with pytest.raises(ParameterError) as info:
+        check_int_tuple("size", (32, 127, 32), 3, 2, 1024, even_axes=(1,))
+    assert info.value.name == "size[1]"
+    with pytest.raises(ParameterError, match="wrong length"):
+        check_int_tuple("size", (32, 128), 3, 2, 1024)
+
+
+def test_view_arguments_are_checked_and_normalised():
+    from skyref.atmosphere.validation import check_view
+    from skyref.errors import ParameterError
+
+    dirs, sun, altitude = check_view([[0.0, 0.0, 1.0]], [0.0, 3.0, 4.0], 10)
+    assert sun.tolist() == [0.0, 0.6, 0.8] and altitude == 10.0 and dirs.shape == (1, 3)
+    with pytest.raises(ParameterError, match="directions"):
+        check_view([[0.0, 0.0, 2.0]], [0.0, 0.0, 1.0], 0.0)
+    with pytest.raises(ParameterError, match="sun_direction"):
+        check_view([[0.0, 0.0, 1.0]], [0.0, 0.0, 0.0], 0.0)
+    with pytest.raises(ParameterError, match="observer_altitude_m"):
+        check_view([[0.0, 0.0, 1.0]], [0.0, 0.0, 1.0], -1.0)

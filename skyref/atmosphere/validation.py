@@ -66,9 +66,43 @@ def check_fields(section: str, fields: dict, cls) -> dict:
     return fields
 
 
+def check_int(name: str, value, lo: int, hi: int, even: bool = False) -> int:
+    """Return ``value`` if it is an integer in [lo, hi] (and even, if asked), else raise."""
+    valid = f"an {'even ' if even else ''}integer in [{lo}, {hi}]"
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise ParameterError(name, value, valid, "not an integer")
+    if not lo <= value <= hi:
+        raise ParameterError(name, value, valid, "out of range")
+    if even and value % 2:
+        raise ParameterError(name, value, valid, "odd")
+    return int(value)
+
+
+def check_int_tuple(name: str, value, count: int, lo: int, hi: int, even_axes=()) -> tuple:
+    """Return ``value`` as a tuple of ``count`` integers in [lo, hi] (a table size), those at
+    ``even_axes`` even; errors name the entry (``name[i]``)."""
+    if not isinstance(value, (tuple, list)) or len(value) != count:
+        raise ParameterError(name, value, f"{count} integers in [{lo}, {hi}]", "wrong length")
+    return tuple(check_int(f"{name}[{i}]", v, lo, hi, even=i in even_axes) for i, v in enumerate(value))
+
+
 def check_choice(name: str, value, choices) -> str:
     """Return ``value`` if it is one of ``choices``."""
     if value not in choices:
         raise ParameterError(name, value, "one of " + ", ".join(repr(c) for c in choices),
                              "unknown choice")
     return value
+
+
+def check_view(directions, sun_direction, observer_altitude_m) -> tuple:
+    """The arguments every sky method's ``radiance`` takes, checked: unit view ``directions``
+    (M, 3), a non-zero ``sun_direction`` (3,) and ``observer_altitude_m`` in [0, 1e8] m. Returns
+    (directions (M, 3), unit sun direction, altitude) as float64."""
+    dirs = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    if not np.allclose(np.linalg.norm(dirs, axis=1), 1.0, atol=1e-6):
+        raise ParameterError("directions", f"array of shape {dirs.shape}", "unit vectors", "not normalized")
+    sun = check_array("sun_direction", sun_direction, min_length=3)
+    if sun.size != 3 or not np.linalg.norm(sun) > 0.0:
+        raise ParameterError("sun_direction", sun.tolist(), "a non-zero 3-vector", "invalid direction")
+    altitude = check_number("observer_altitude_m", observer_altitude_m, 0.0, 1.0e8)
+    return dirs, sun / np.linalg.norm(sun), altitude

@@ -47,7 +47,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from skyref.atmosphere.validation import check_choice, check_fields, check_number
+from skyref.atmosphere.validation import check_choice, check_fields, check_int, check_number
 from skyref.errors import ParameterError
 
 FORMATS = ("spectral", "rgb")
@@ -78,25 +78,19 @@ class OutputSettings:
         check_choice("output.format", self.format, FORMATS)
         for name in ("width", "height"):
             if getattr(self, name) is not None:
-                _check_int(f"output.{name}", getattr(self, name), 1, 1 << 14)
+                check_int(f"output.{name}", getattr(self, name), 1, 1 << 14)
         if (self.spp is None) == (self.target_relative_error is None):
             raise ParameterError("output.spp", self.spp, "exactly one of output.spp and "
                                  "output.target_relative_error", "give one sample budget")
         if self.spp is not None:
-            _check_int("output.spp", self.spp, 2, MAX_SPP_LIMIT)
+            check_int("output.spp", self.spp, 2, MAX_SPP_LIMIT)
         if self.target_relative_error is not None:
             check_number("output.target_relative_error", self.target_relative_error, 1e-4, 1.0)
-        _check_int("output.max_spp", self.max_spp, 2, MAX_SPP_LIMIT)
-        _check_int("output.passes", self.passes, 2, 64)
-        _check_int("output.seed", self.seed, 0, 1 << 16)
+        check_int("output.max_spp", self.max_spp, 2, MAX_SPP_LIMIT)
+        check_int("output.passes", self.passes, 2, 64)
+        check_int("output.seed", self.seed, 0, 1 << 16)
         if self.spp is not None and self.spp < self.passes:
             raise ParameterError("output.spp", self.spp, f">= output.passes ({self.passes})", "too few samples")
-
-
-def _check_int(name, value, lo, hi) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
-        raise ParameterError(name, value, f"an integer in [{lo}, {hi}]", "invalid value")
-    return value
 
 
 def _set_path(data: dict, path: str, value) -> dict:

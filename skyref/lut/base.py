@@ -21,7 +21,7 @@ import drjit as dr
 import numpy as np
 
 from skyref.atmosphere.spectra import solar_irradiance, wavelength_grid
-from skyref.atmosphere.validation import check_array, check_choice, check_number
+from skyref.atmosphere.validation import check_choice, check_number, check_view
 from skyref.errors import ParameterError
 from skyref.lut.table import PRECISIONS
 from skyref.scene import SUN_ANGULAR_RADIUS_DEG
@@ -175,14 +175,8 @@ class LutMethod:
 
         if self.precompute_seconds is None:
             raise RuntimeError(f"{self.name}: call precompute() before radiance()")
-        dirs = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
-        sun = np.asarray(sun_direction, dtype=np.float64).reshape(3)
-        check_number("observer_altitude_m", observer_altitude_m, 0.0, 1.0e8)
-        if not np.allclose(np.linalg.norm(dirs, axis=1), 1.0, atol=1e-6):
-            raise ParameterError("directions", "...", "unit vectors", "not normalized")
-        check_array("sun_direction", sun / np.linalg.norm(sun), -1.0, 1.0, min_length=3)
-        sun = sun / np.linalg.norm(sun)
-        r = self.optics.bottom_radius + float(observer_altitude_m)
+        dirs, sun, altitude = check_view(directions, sun_direction, observer_altitude_m)
+        r = self.optics.bottom_radius + altitude
         mu = mi.Float64(dirs[:, 2])
         mu_s = mi.Float64(np.full(len(dirs), sun[2]))
         nu = mi.Float64(np.clip(dirs @ sun, -1.0, 1.0))

@@ -84,7 +84,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from skyref.atmosphere.validation import check_choice, check_number
+from skyref.atmosphere.validation import check_choice, check_int, check_number
 from skyref.errors import ParameterError
 from skyref.lut import planet
 from skyref.lut.base import LutMethod
@@ -96,16 +96,6 @@ from skyref.scene import SUN_ANGULAR_RADIUS_DEG
 #: The scattering density is stored per kilometre (W m^-2 sr^-1 nm^-1 km^-1), as in Bruneton's
 #: code, whose length unit is the km: per metre its values (~1e-8) would underflow float16.
 METRES_PER_KM = 1000.0
-
-
-def _check_size(name: str, value, lo: int, hi: int, even: bool = False) -> int:
-    """An integer table size or sample count in [lo, hi] (even if asked)."""
-    valid = f"an {'even ' if even else ''}integer in [{lo}, {hi}]"
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise ParameterError(name, value, valid, "not an integer")
-    if not lo <= value <= hi or (even and value % 2):
-        raise ParameterError(name, value, valid, "out of range" if not lo <= value <= hi else "odd")
-    return int(value)
 
 
 def _smoothstep(edge0: float, edge1: float, x):
@@ -136,22 +126,22 @@ class Bruneton2017(LutMethod):
                  max_sun_zenith_deg: float | None = None, integration_samples: int = 50,
                  density_samples: int = 16, irradiance_samples: int = 32, transmittance_samples: int = 500):
         check_choice("precision", precision, PRECISIONS)
-        self.scattering_orders = _check_size("scattering_orders", scattering_orders, 1, 100)
+        self.scattering_orders = check_int("scattering_orders", scattering_orders, 1, 100)
         if not isinstance(combined_mie, bool):
             raise ParameterError("combined_mie", combined_mie, "true or false", "not a boolean")
         self.combined_mie = combined_mie
-        self.r_size = _check_size("r_size", r_size, 2, 1024)
-        self.mu_size = _check_size("mu_size", mu_size, 4, 4096, even=True)
-        self.mu_s_size = _check_size("mu_s_size", mu_s_size, 2, 1024)
-        self.nu_size = _check_size("nu_size", nu_size, 2, 1024)
-        self.transmittance_width = _check_size("transmittance_width", transmittance_width, 2, 8192)
-        self.transmittance_height = _check_size("transmittance_height", transmittance_height, 2, 8192)
-        self.irradiance_width = _check_size("irradiance_width", irradiance_width, 2, 8192)
-        self.irradiance_height = _check_size("irradiance_height", irradiance_height, 2, 8192)
-        self.integration_samples = _check_size("integration_samples", integration_samples, 1, 100_000)
-        self.density_samples = _check_size("density_samples", density_samples, 2, 1024)
-        self.irradiance_samples = _check_size("irradiance_samples", irradiance_samples, 2, 1024, even=True)
-        self.transmittance_samples = _check_size("transmittance_samples", transmittance_samples, 1, 100_000)
+        self.r_size = check_int("r_size", r_size, 2, 1024)
+        self.mu_size = check_int("mu_size", mu_size, 4, 4096, even=True)
+        self.mu_s_size = check_int("mu_s_size", mu_s_size, 2, 1024)
+        self.nu_size = check_int("nu_size", nu_size, 2, 1024)
+        self.transmittance_width = check_int("transmittance_width", transmittance_width, 2, 8192)
+        self.transmittance_height = check_int("transmittance_height", transmittance_height, 2, 8192)
+        self.irradiance_width = check_int("irradiance_width", irradiance_width, 2, 8192)
+        self.irradiance_height = check_int("irradiance_height", irradiance_height, 2, 8192)
+        self.integration_samples = check_int("integration_samples", integration_samples, 1, 100_000)
+        self.density_samples = check_int("density_samples", density_samples, 2, 1024)
+        self.irradiance_samples = check_int("irradiance_samples", irradiance_samples, 2, 1024, even=True)
+        self.transmittance_samples = check_int("transmittance_samples", transmittance_samples, 1, 100_000)
         if max_sun_zenith_deg is None:
             max_sun_zenith_deg = 102.0 if precision == "float16" else 120.0
         self.max_sun_zenith_deg = check_number("max_sun_zenith_deg", max_sun_zenith_deg, 90.0, 180.0,
@@ -644,7 +634,7 @@ class Bruneton2017(LutMethod):
         if arrays["transmittance"].min() < 0.0 or arrays["transmittance"].max() > 1.0:
             raise ParameterError("transmittance", "array", "values in [0, 1]", "out of range")
         r_size, mu_size, width, stored = arrays["scattering"].shape
-        mu_s_size = _check_size("mu_s_size", mu_s_size, 2, 1024)
+        mu_s_size = check_int("mu_s_size", mu_s_size, 2, 1024)
         if width % mu_s_size:
             raise ParameterError("mu_s_size", mu_s_size, f"a divisor of the scattering width {width}",
                                  "does not split the width into nu x mu_s")

@@ -100,7 +100,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from skyref.atmosphere.validation import check_choice
+from skyref.atmosphere.validation import check_choice, check_int, check_int_tuple
 from skyref.errors import ParameterError
 from skyref.lut import planet
 from skyref.lut.base import LutMethod
@@ -175,21 +175,6 @@ def elek_rayleigh_phase(nu):
     return 0.8 * (1.4 + 0.5 * nu) / (4.0 * math.pi)
 
 
-def _check_int(name: str, value, lo: int, hi: int, even: bool = False) -> int:
-    valid = f"an {'even ' if even else ''}integer in [{lo}, {hi}]"
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise ParameterError(name, value, valid, "not an integer")
-    if not lo <= value <= hi or (even and value % 2):
-        raise ParameterError(name, value, valid, "out of range" if not lo <= value <= hi else "odd")
-    return int(value)
-
-
-def _check_size(name: str, value, count: int, lo: int, hi: int, even_axes=()) -> tuple:
-    if not isinstance(value, (tuple, list)) or len(value) != count:
-        raise ParameterError(name, value, f"{count} integers in [{lo}, {hi}]", "wrong length")
-    return tuple(_check_int(f"{name}[{i}]", v, lo, hi, even=i in even_axes) for i, v in enumerate(value))
-
-
 # --- the method ------------------------------------------------------------------------------
 
 
@@ -214,20 +199,20 @@ class Elek2009(LutMethod):
                  half_table: bool = True, gathering_samples: int = 128,
                  aerial_perspective_size=(32, 32, 32), transmittance_size=(256, 64),
                  integration_samples: int = 100):
-        self.scattering_size = _check_size("scattering_size", scattering_size, 3, 2, 1024, even_axes=(1,))
+        self.scattering_size = check_int_tuple("scattering_size", scattering_size, 3, 2, 1024, even_axes=(1,))
         if self.scattering_size[1] < 4:
             raise ParameterError("scattering_size[1]", scattering_size[1], "an even integer in [4, 1024]",
                                  "each half of the view axis needs 2 cells")
-        self.scattering_orders = _check_int("scattering_orders", scattering_orders, 1, 50)
+        self.scattering_orders = check_int("scattering_orders", scattering_orders, 1, 50)
         self.rayleigh_phase_name = check_choice("rayleigh_phase", rayleigh_phase, RAYLEIGH_PHASES)
         if not isinstance(half_table, bool):
             raise ParameterError("half_table", half_table, "True or False", "not a bool")
         self.half_table = half_table
         self._volume_key = None
-        self.gathering_samples = _check_int("gathering_samples", gathering_samples, 4, 100_000)
-        self.aerial_perspective_size = _check_size("aerial_perspective_size", aerial_perspective_size, 3, 2, 1024)
-        self.transmittance_size = _check_size("transmittance_size", transmittance_size, 2, 2, 4096)
-        self.integration_samples = _check_int("integration_samples", integration_samples, 2, 100_000, even=True)
+        self.gathering_samples = check_int("gathering_samples", gathering_samples, 4, 100_000)
+        self.aerial_perspective_size = check_int_tuple("aerial_perspective_size", aerial_perspective_size, 3, 2, 1024)
+        self.transmittance_size = check_int_tuple("transmittance_size", transmittance_size, 2, 2, 4096)
+        self.integration_samples = check_int("integration_samples", integration_samples, 2, 100_000, even=True)
         super().__init__(atmosphere, wavelengths_nm, precision, sun_angular_radius_deg, variant)
         self.atmosphere_height = self.optics.top_radius - self.optics.bottom_radius
 

@@ -82,7 +82,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from skyref.atmosphere.validation import check_array, check_number
+from skyref.atmosphere.validation import check_array, check_int, check_int_tuple, check_number
 from skyref.errors import ParameterError
 from skyref.lut import planet
 from skyref.lut.base import LutMethod
@@ -101,18 +101,6 @@ SKY_VIEW_FULL_SAMPLES_DISTANCE = 100_000.0
 
 #: Sky-view tables kept for (observer radius, sun zenith cosine) pairs before the oldest goes.
 SKY_VIEW_CACHE_SIZE = 16
-
-
-def _check_count(name: str, value, lo: int, hi: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not lo <= value <= hi:
-        raise ParameterError(name, value, f"an integer in [{lo}, {hi}]", "invalid")
-    return int(value)
-
-
-def _check_size(name: str, value, dims: int, lo: int = 2, hi: int = 4096) -> tuple:
-    if not isinstance(value, (tuple, list)) or len(value) != dims:
-        raise ParameterError(name, value, f"{dims} integers in [{lo}, {hi}]", "wrong shape")
-    return tuple(_check_count(f"{name}[{i}]", v, lo, hi) for i, v in enumerate(value))
 
 
 def _per_lane(values, view):
@@ -197,22 +185,22 @@ class Hillaire2020(LutMethod):
         if not isinstance(ray_march_sky, bool):
             raise ParameterError("ray_march_sky", ray_march_sky, "True or False", "not a boolean")
         self.ray_march_sky = ray_march_sky
-        self.transmittance_size = _check_size("transmittance_size", transmittance_size, 2)
-        self.transmittance_samples = _check_count("transmittance_samples", transmittance_samples, 1, 100_000)
-        self.multiple_scattering_size = _check_size("multiple_scattering_size", multiple_scattering_size, 2)
-        directions = _check_count("multiple_scattering_directions", multiple_scattering_directions, 1, 4096)
+        self.transmittance_size = check_int_tuple("transmittance_size", transmittance_size, 2, 2, 4096)
+        self.transmittance_samples = check_int("transmittance_samples", transmittance_samples, 1, 100_000)
+        self.multiple_scattering_size = check_int_tuple("multiple_scattering_size", multiple_scattering_size, 2, 2, 4096)
+        directions = check_int("multiple_scattering_directions", multiple_scattering_directions, 1, 4096)
         if math.isqrt(directions) ** 2 != directions:
             raise ParameterError("multiple_scattering_directions", directions,
                                  "a square number (an n x n grid on the sphere): 1, 4, ..., 64, ...", "not a square")
         self.multiple_scattering_directions = directions
-        self.multiple_scattering_samples = _check_count("multiple_scattering_samples",
+        self.multiple_scattering_samples = check_int("multiple_scattering_samples",
                                                         multiple_scattering_samples, 1, 10_000)
-        self.sky_view_size = _check_size("sky_view_size", sky_view_size, 2)
-        self.sky_view_samples = _check_size("sky_view_samples", sky_view_samples, 2, lo=1, hi=10_000)
+        self.sky_view_size = check_int_tuple("sky_view_size", sky_view_size, 2, 2, 4096)
+        self.sky_view_samples = check_int_tuple("sky_view_samples", sky_view_samples, 2, 1, 10_000)
         if self.sky_view_samples[0] > self.sky_view_samples[1]:
             raise ParameterError("sky_view_samples", sky_view_samples, "(fewest, most) with fewest <= most",
                                  "fewest > most")
-        self.aerial_perspective_size = _check_size("aerial_perspective_size", aerial_perspective_size, 3)
+        self.aerial_perspective_size = check_int_tuple("aerial_perspective_size", aerial_perspective_size, 3, 2, 4096)
         self.aerial_perspective_slice_km = check_number("aerial_perspective_slice_km", aerial_perspective_slice_km,
                                                         0.0, 1.0e4, lo_open=True)
         super().__init__(atmosphere, wavelengths_nm, precision, sun_angular_radius_deg, variant)
