@@ -1,0 +1,190 @@
+"""The Hosek–Wilkie evaluator: the published coefficients against the formula worked by hand,
+NumPy against JAX, stability at the edges of the model's domain, and bad inputs."""
+
+import math
+
+import numpy as np
+import pytest
+
+from skyref.analytic.hosek import (BAND_CENTRES_NM, CHANNELS, CoefficientTable, hosek_f, published_arrays,
+                                   published_table)
+from skyref.errors import ParameterError
+
+KINDS = ("spectral", "xyz", "rgb")
+
+
+def by_hand(arrays, shape_name, radiance_name, elevation, turbidity, albedo, theta, gamma):
+    """The published model computed straight from the flat arrays with explicit loops: the
+    reference code's cooking (integer turbidity and remainder, the two albedos, the quintic
+    Bezier over x = (elevation / (pi/2))^(1/3)) and F with coefficients at their stored indices
+    (A B C D E F G I H)."""
+    shape, rad = arrays[shape_name], arrays[radiance_name]
+    x = (elevation / (math.pi / 2)) ** (1.0 / 3.0)
+    bernstein = [math.comb(5, k) * x ** k * (1 - x) ** (5 - k) for k in range(6)]
+    low = int(turbidity)
+    rem = turbidity - low
+    terms = [(0, low, (1 - albedo) * (1 - rem)), (1, low, albedo * (1 - rem))]
+    if low < 10:
+        terms += [(0, low + 1, (1 - albedo) * rem), (1, low + 1, albedo * rem)]
+    config = [0.0] * 9
+    scale = 0.0
+    for a, t, weight in terms:
+        for k in range(6):
+            for i in range(9):
+                config[i] += weight * bernstein[k] * shape[((a * 10 + t - 1) * 6 + k) * 9 + i]
+            scale += weight * bernstein[k] * rad[(a * 10 + t - 1) * 6 + k]
+    A, B, C, D, E, F, G, I, H = config
+    chi = (1 + math.cos(gamma) ** 2) / (1 + H * H - 2 * H * math.cos(gamma)) ** 1.5
+    f = (1 + A * math.exp(B / (math.cos(theta) + 0.01))) * (
+        C + D * math.exp(E * gamma) + F * math.cos(gamma) ** 2 + G * chi + I * math.sqrt(math.cos(theta)))
+    return scale * f
+
+
+CASES = [  # elevation (rad), turbidity, albedo, theta, gamma
+    (0.4, 3.0, 0.0, 0.3, 0.5), (0.05, 1.0, 1.0, 1.5, 2.9), (1.2, 10.0, 0.3, 0.9, 0.2),
+    (0.8, 9.5, 0.7, 1.2, 1.6), (1.5707963, 6.25, 0.5, 0.0, 1.57), (0.001, 2.7, 0.1, 1.57, 0.01),
+]
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_published_coefficients_reproduce_the_formula_by_hand(kind):
+    arrays = published_arrays()
+    table = published_table(kind)
+    for elevation, turbidity, albedo, theta, gamma in CASES:
+        got = table.radiance(theta, gamma, elevation, turbidity, albedo)
+        for index in range(len(table.channels)):
+            if kind == "spectral":
+                names = (f"dataset{table.channels[index]}", f"datasetRad{table.channels[index]}")
+            else:
+                names = (f"dataset{kind.upper()}{index + 1}", f"dataset{kind.upper()}Rad{index + 1}")
+            expected = by_hand(arrays, *names, elevation, turbidity, albedo, theta, gamma)
+            assert got[index] == pytest.approx(expected, rel=1e-12, abs=1e-15), (kind, index, elevation, turbidity)
+
+
+def test_published_values_are_the_shared_data_and_in_physical_units():
+    table = published_table("spectral")
+    assert table.coefficients.shape == (11, 2, 10, 6, 9) and table.radiances.shape == (11, 2, 10, 6)
+    assert table.channels == tuple(f"{w:g}" for w in BAND_CENTRES_NM)
+    # A clear noon sky at 480 nm is of order 0.05-0.2 W m^-2 sr^-1 nm^-1 at the zenith.
+    zenith = table.radiance(0.0, math.radians(30.0), math.radians(60.0), 2.0, 0.1)[BAND_CENTRES_NM.index(480.0)]
+    assert 0.03 < zenith < 0.3
+
+
+def test_spectral_radiance_interpolates_linearly_between_band_centres():
+    table = published_table("spectral")
+    args = (0.7, 1.1, 0.5, 4.0, 0.2)
+    bands = table.radiance(*args)
+    assert table.spectral_radiance(500.0, *args) == pytest.approx(0.5 * (bands[4] + bands[5]), rel=1e-12)
+    assert table.spectral_radiance(720.0, *args) == pytest.approx(bands[10], rel=1e-12)
+    both = table.spectral_radiance(np.array([330.0, 710.0]), np.array([0.1, 0.2, 0.3]), 1.0, 0.5, 4.0, 0.2)
+    assert both.shape == (3, 2)
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_jax_float32_matches_numpy_and_is_jittable(kind):
+    import jax
+    import jax.numpy as jnp
+
+    table = published_table(kind)
+    rng = np.random.default_rng(3)
+    theta, gamma = rng.uniform(0, math.pi / 2, 1000), rng.uniform(0, math.pi, 1000)
+    expected = table.radiance(theta, gamma, 0.3, 4.5, 0.2)
+    evaluate = jax.jit(lambda t, g, e: table.radiance(t, g, e, 4.5, 0.2, xp=jnp))
+    got = np.asarray(evaluate(jnp.asarray(theta, jnp.float32), jnp.asarray(gamma, jnp.float32), 0.3))
+    scale = np.abs(expected).max(axis=0)
+    assert np.max(np.abs(got - expected) / scale) < 2e-5
+
+
+def view_angles(theta, azimuth, elevation):
+    """(theta, gamma) of views at zenith angles ``theta`` (column) and azimuths ``azimuth`` from
+    the sun (row), for the sun at ``elevation`` (held at 0 below the horizon, as the model does):
+    gamma from the angle between unit vectors, accurate at 0."""
+    sun_zenith = math.pi / 2 - max(elevation, 0.0)
+    view = np.stack(np.broadcast_arrays(np.sin(theta) * np.cos(azimuth), np.sin(theta) * np.sin(azimuth),
+                                        np.cos(theta) + 0 * azimuth), axis=-1)
+    sun = np.array([math.sin(sun_zenith), 0.0, math.cos(sun_zenith)])
+    gamma = np.arctan2(np.linalg.norm(np.cross(view, sun), axis=-1), view @ sun)
+    return np.broadcast_to(theta, gamma.shape), gamma
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_stable_at_the_edges_of_the_domain(kind):
+    """Sun on and below the horizon, views at and below it, the sun's direction itself, turbidity
+    1 and 10: finite, non-negative radiance, positive except in the thin band above the horizon
+    where the published coefficients themselves turn F negative (documented in hosek.py)."""
+    table = published_table(kind)
+    theta = np.array([0.0, 0.5, 1.2, math.radians(88.9), math.pi / 2 - 1e-9, math.pi / 2, 2.0, math.pi])[:, None]
+    azimuth = np.array([0.0, 1e-9, 1e-4, 0.5, math.pi / 2, math.pi])[None, :]
+    for elevation in (-math.pi / 2, -0.1, 0.0, 1e-6, 0.3, math.pi / 2):
+        for turbidity in (1.0, 9.999, 10.0):
+            for albedo in (0.0, 1.0):
+                value = table.radiance(*view_angles(theta, azimuth, elevation), elevation, turbidity, albedo)
+                assert np.all(np.isfinite(value)) and np.all(value >= 0.0), (elevation, turbidity, albedo)
+                assert np.all(value[theta[:, 0] < math.radians(89.0)] > 0.0), (elevation, turbidity, albedo)
+        on_sun = table.radiance(math.pi / 2 - max(elevation, 0.0), 0.0, elevation, 5.0, 0.5)   # gamma = 0
+        assert np.all(np.isfinite(on_sun)) and np.all(on_sun > 0.0)
+    angles = view_angles(theta, azimuth, -0.2)
+    assert np.array_equal(table.radiance(*angles, -0.2, 3.0, 0.5), table.radiance(*angles, 0.0, 3.0, 0.5))
+    np.testing.assert_allclose(table.radiance(math.pi, 1.0, 0.2, 3.0, 0.5),  # sqrt(cos(pi/2)) = 8e-9, not 0
+                               table.radiance(math.pi / 2, 1.0, 0.2, 3.0, 0.5), rtol=1e-6)
+
+
+def test_published_f_is_negative_only_in_a_thin_band_at_the_horizon():
+    """Why the evaluator clamps at zero: for the published coefficients F < 0 only within 1 deg
+    of the horizon, away from a low sun (here 320 nm, sun on the horizon)."""
+    table = published_table("spectral")
+    theta = np.radians(np.linspace(0.0, 90.0, 901))[:, None]
+    theta, gamma = view_angles(theta, np.radians(np.linspace(0.0, 180.0, 181))[None, :], 0.0)
+    coefficients, _ = table.configuration(0.0, 7.0, 0.0)
+    f = hosek_f(coefficients[0], np.cos(theta), gamma)
+    assert (f < 0).any() and np.all(theta[f < 0] > math.radians(89.0))
+    assert np.all(table.radiance(theta, gamma, 0.0, 7.0, 0.0) >= 0.0)
+
+
+def test_chi_is_finite_and_accurate_near_its_pole():
+    """H close to 1 and the view on the sun: the denominator (1 - H)^2 + 4 H sin^2(gamma/2) keeps
+    float32 within 1e-5 of float64 (same inputs), where 1 + H^2 - 2 H cos(gamma) loses every digit."""
+    import jax.numpy as jnp
+
+    coefficients = np.array([-1.0, -0.3, 0.2, 1.0, -2.0, 0.5, 0.1, 1.0, 0.999], dtype=np.float32)
+    gamma = np.array([0.0, 1e-6, 1e-4, 1e-3, 1e-2], dtype=np.float32)
+    exact = hosek_f(coefficients.astype(np.float64), 1.0, gamma.astype(np.float64))
+    single = np.asarray(hosek_f(jnp.asarray(coefficients), jnp.float32(1.0), jnp.asarray(gamma), jnp))
+    assert np.all(np.isfinite(exact)) and np.all(exact > 0) and exact[0] > 1e7
+    assert np.max(np.abs(single / exact - 1.0)) < 1e-5
+    h, g = coefficients[8], gamma[1]
+    naive = np.float32(1) + h * h - np.float32(2) * h * np.cos(g)            # what the textbook form computes
+    assert abs(naive / ((1.0 - float(h)) ** 2 + 4.0 * float(h) * math.sin(float(g) / 2) ** 2) - 1.0) > 1e-2
+
+
+@pytest.mark.parametrize("call,name", [
+    (lambda t: t.radiance(0.5, 0.5, 0.3, 0.5, 0.0), "turbidity"),
+    (lambda t: t.radiance(0.5, 0.5, 0.3, 11.0, 0.0), "turbidity"),
+    (lambda t: t.radiance(0.5, 0.5, 0.3, float("nan"), 0.0), "turbidity"),
+    (lambda t: t.radiance(0.5, 0.5, 0.3, 2.0, 1.5), "albedo"),
+    (lambda t: t.radiance(0.5, 0.5, 2.0, 2.0, 0.5), "solar_elevation"),
+    (lambda t: t.radiance(-0.1, 0.5, 0.3, 2.0, 0.5), "theta"),
+    (lambda t: t.radiance(np.array([0.1, 4.0]), 0.5, 0.3, 2.0, 0.5), "theta"),
+    (lambda t: t.radiance(0.5, 3.5, 0.3, 2.0, 0.5), "gamma"),
+    (lambda t: t.spectral_radiance(300.0, 0.5, 0.5, 0.3, 2.0, 0.5), "wavelength_nm"),
+    (lambda t: t.spectral_radiance(750.0, 0.5, 0.5, 0.3, 2.0, 0.5), "wavelength_nm"),
+    (lambda t: published_table("xyz").spectral_radiance(500.0, 0.5, 0.5, 0.3, 2.0, 0.5), "kind"),
+    (lambda t: CoefficientTable("hosek", "spectral", t.coefficients[:3], t.radiances[:3]), "coefficients"),
+    (lambda t: CoefficientTable("hosek", "lms", t.coefficients, t.radiances), "kind"),
+    (lambda t: CoefficientTable("preetham", "spectral", t.coefficients, t.radiances), "form"),
+    (lambda t: published_table("cmyk"), "kind"),
+])
+def test_bad_inputs_raise_parameter_error_naming_the_parameter_and_range(call, name):
+    with pytest.raises(ParameterError) as info:
+        call(published_table("spectral"))
+    assert info.value.name == name
+    assert "valid:" in str(info.value)
+
+
+def test_error_message_states_the_range():
+    with pytest.raises(ParameterError, match=r"turbidity = 0\.5: out of range \(valid: \[1, 10\]\)"):
+        published_table("rgb").radiance(0.5, 0.5, 0.3, 0.5, 0.0)
+
+
+def test_channels_of_each_kind():
+    assert CHANNELS["xyz"] == ("X", "Y", "Z") and len(published_table("rgb").channels) == 3
