@@ -216,6 +216,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-q", "--quiet", action="store_true", help="no progress messages")
     p.set_defaults(run=cmd_audit)
 
+    from skyref.fit.cli import add_fit_parser
+
+    add_fit_parser(sub)
+
     p = sub.add_parser("info", help="versions, libLLVM, Mitsuba variants, presets")
     p.set_defaults(run=cmd_info)
     return parser

@@ -1,0 +1,166 @@
+"""``skyref fit``: fit Hosek–Wilkie (and Perez baseline) tables to a batch dataset, or report the
+errors of a table against one.
+
+    skyref fit --grid out/hosek-training --out coeffs/      # fit; write coeffs/hosek.* and perez.*
+    skyref fit --evaluate coeffs/hosek.npz --grid out/hosek-training
+    skyref fit --evaluate published --grid out/hosek-training   # the published model
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from skyref.errors import ParameterError
+
+KINDS = ("spectral", "xyz", "rgb")
+FORM_NAMES = {"hosek": "Hosek-Wilkie", "perez": "Perez (Preetham-style baseline)"}
+
+
+def add_fit_parser(subparsers):
+    """Add the ``fit`` subcommand to ``skyref``'s argparse subparsers."""
+    p = subparsers.add_parser("fit", help="fit Hosek-Wilkie sky coefficients to a batch dataset, or evaluate a table")
+    p.add_argument("--grid", required=True, metavar="DATASET",
+                   help="a spectral 'skyref batch' output directory (or its dataset.zarr)")
+    p.add_argument("--out", metavar="DIR", help="write the fitted tables here (.npz, .json, C headers)")
+    p.add_argument("--evaluate", metavar="COEFFS",
+                   help="instead of fitting, report the errors of a table (.npz or .json, or 'published')")
+    p.add_argument("--kinds", default=",".join(KINDS), help="comma-separated kinds of tables (default: all the "
+                   "dataset supports): spectral, xyz, rgb")
+    p.add_argument("--no-perez", action="store_true", help="skip the Perez (Preetham-style) baseline fit")
+    p.add_argument("--no-joint", action="store_true", help="skip the joint refinement of the Bezier control points")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
+    p.set_defaults(run=cmd_fit)
+    return p
+
+
+def _kinds(text: str, available) -> list[str]:
+    kinds = [k.strip() for k in text.split(",") if k.strip()]
+    for kind in kinds:
+        if kind not in KINDS:
+            raise ParameterError("--kinds", text, "a comma-separated subset of " + ", ".join(KINDS), "unknown kind")
+    chosen = [k for k in kinds if k in available]
+    if not chosen:
+        raise ParameterError("--kinds", text, "kinds the dataset supports: " + ", ".join(available),
+                             "none available")
+    return chosen
+
+
+def _noise_line(training) -> str:
+    noise = training.relative_noise()
+    finite = noise[np.isfinite(noise)]
+    if finite.size == 0:
+        return "noise: none recorded"
+    return (f"noise of the data (standard error / radiance over fitted directions): median "
+            f"{100 * np.median(finite):.2f}%, 95th percentile {100 * np.percentile(finite, 95):.2f}%")
+
+
+def _summary_lines(name, table, training) -> list[str]:
+    from skyref.fit.evaluate import error_summary
+
+    summary = error_summary(table, training)
+    lines = [f"{name} vs {training.kind} ground truth ({len(training.solar_elevation)} skies): relative error, %",
+             f"  {'channel':>8} {'mean':>8} {'rms':>8} {'p95':>8} {'max':>8}   (truth's noise: rms, p95)"]
+    for channel, stats in summary["channels"].items():
+        if stats is None:
+            continue
+        lines.append(f"  {channel:>8} {100 * stats['mean']:8.2f} {100 * stats['rms']:8.2f} {100 * stats['p95']:8.2f} "
+                     f"{100 * stats['max']:8.2f}   ({100 * stats['noise_rms']:.2f}, {100 * stats['noise_p95']:.2f})")
+    by = {}
+    for sky in summary["skies"]:
+        for key, label in (("solar_elevation_deg", "elevation"), ("turbidity", "turbidity")):
+            rms = [s["rms"] for s in sky["channels"].values() if s is not None]
+            if rms:
+                by.setdefault(label, {}).setdefault(round(sky[key], 3), []).append(np.sqrt(np.mean(np.square(rms))))
+    for label, groups in by.items():
+        lines.append(f"  rms over channels by {label}: " +
+                     ", ".join(f"{value:g}: {100 * np.sqrt(np.mean(np.square(v))):.2f}" for value, v in sorted(groups.items())))
+    return lines
+
+
+def _progress(quiet: bool):
+    """A ``progress(stage, done, total)`` callback drawing one tqdm bar per stage."""
+    if quiet:
+        return None
+    from tqdm import tqdm
+
+    bars = {}
+
+    def update(stage, done, total):
+        bar = bars.get(stage)
+        if bar is None:
+            bar = bars[stage] = tqdm(total=total, desc=f"fit: {stage}", unit="problem")
+        bar.update(done - bar.n)
+        if done >= total:
+            bar.close()
+    return update
+
+
+def _evaluate(args, training_sets) -> int:
+    from skyref.analytic.hosek import published_table
+    from skyref.fit.export import read_tables
+
+    if args.evaluate == "published":
+        tables = {kind: published_table(kind) for kind in KINDS}
+        name = "published Hosek-Wilkie 1.4a"
+    else:
+        tables, metadata = read_tables(args.evaluate)
+        name = f"{args.evaluate} ({FORM_NAMES.get(metadata.get('form'), metadata.get('form', '?'))})"
+    kinds = [k for k in _kinds(args.kinds, list(training_sets)) if k in tables]
+    if not kinds:
+        raise ParameterError("--evaluate", args.evaluate, "a table of a kind in the dataset: " +
+                             ", ".join(training_sets), "no matching table")
+    for kind in kinds:
+        print(_noise_line(training_sets[kind]))
+        print("\n".join(_summary_lines(name, tables[kind], training_sets[kind])))
+    return 0
+
+
+def _fit(args, training_sets) -> int:
+    from skyref.fit.export import write_tables
+    from skyref.fit.fitter import fit_table
+
+    if not args.out:
+        raise ParameterError("--out", None, "a directory for the fitted tables", "missing (or give --evaluate)")
+    os.makedirs(args.out, exist_ok=True)
+    kinds = _kinds(args.kinds, list(training_sets))
+    progress = _progress(args.quiet)
+    written = []
+    for form in ("hosek",) if args.no_perez else ("hosek", "perez"):
+        tables, runs, notes = {}, {}, {}
+        for kind in kinds:
+            training = training_sets[kind]
+            if form == "hosek":
+                print(_noise_line(training))
+            result = fit_table(training, form=form, joint=not args.no_joint, progress=progress)
+            tables[kind] = result.table
+            unfitted = [f"{channel}" for channel, done in zip(result.table.channels, result.fitted.any(axis=(1, 2)))
+                        if not done]
+            notes[kind] = ("Channels not fitted (start values kept): " + ", ".join(unfitted)) if unfitted else ""
+            runs[kind] = {"channels_fitted": [c for c in result.table.channels if c not in unfitted],
+                          "fitted_groups": result.fitted.tolist(), "timings_s": result.timings,
+                          "unconverged": result.unconverged, "most_steps": result.most_steps,
+                          "skipped_skies": {str(k): v for k, v in result.skipped.items()}}
+            print(f"{FORM_NAMES[form]} {kind}: fitted in {sum(result.timings.values()):.1f} s "
+                  f"({', '.join(f'{k} {v:.1f} s' for k, v in result.timings.items())}); "
+                  f"unconverged problems: {result.unconverged}")
+            print("\n".join(_summary_lines(f"{FORM_NAMES[form]} fit", result.table, training)))
+        metadata = {"source": f"skyref fit of {os.path.abspath(args.grid)}", "training": args.grid,
+                    "joint_refinement": not args.no_joint, "fits": runs}
+        written += write_tables(tables, args.out, form, metadata=metadata, notes=notes)
+    print("wrote " + ", ".join(written))
+    return 0
+
+
+def cmd_fit(args) -> int:
+    """Run ``skyref fit`` (see the module's documentation)."""
+    from skyref.fit.training import load_batch_dataset
+
+    if args.evaluate and args.out:
+        raise ParameterError("--out", args.out, "only when fitting (without --evaluate)", "conflicting options")
+    training_sets = load_batch_dataset(args.grid)
+    if args.evaluate:
+        return _evaluate(args, training_sets)
+    return _fit(args, training_sets)
+
