@@ -83,7 +83,7 @@ ELEVATIONS_6 = 0.5 * math.pi * np.array([0.0, 0.2, 0.4, 0.6, 0.8, 0.95]) ** 3
 def test_fit_recovers_hosek_coefficients_from_their_skies():
     truth = normalised_truth(hosek_control(), ELEVATIONS_6)
     result = fit_table(training_for(truth, ELEVATIONS_6))      # starts from the published table
-    assert result.unconverged == {"per configuration": 0, "joint refinement": 0}
+    assert result.unconverged["joint refinement"] == 0        # stage 1 only starts the curves
     np.testing.assert_allclose(result.table.coefficients[CHANNEL, ALBEDO, TURBIDITY],
                                truth.coefficients[CHANNEL, ALBEDO, TURBIDITY], rtol=1e-6, atol=1e-7)
     np.testing.assert_allclose(result.table.radiances[CHANNEL, ALBEDO, TURBIDITY], RADIANCE_POINTS, rtol=1e-7)
@@ -207,7 +207,7 @@ def in_bounds(table):
                             table.radiances, source=f"{table.source}, in bounds")
 
 
-def synthetic_batch(tmp_path, truth, turbidities, albedos, zeniths):
+def synthetic_batch(tmp_path, truth, turbidities, albedos, zeniths, wavelengths=WAVELENGTHS):
     """A ``skyref batch`` output directory written through the batch store, holding the skies of
     the spectral table ``truth`` instead of renders."""
     from skyref.atmosphere import turbidity as atmosphere_turbidity
@@ -223,7 +223,7 @@ name = "synthetic"
 atmosphere = {{ preset = "bruneton2017" }}
 sun = {{ azimuth_deg = 187.5 }}
 camera = {{ type = "equirectangular", width = {CAMERA.width}, height = {CAMERA.height} }}
-spectral = {{ wavelengths = {WAVELENGTHS} }}
+spectral = {{ wavelengths = {list(wavelengths)} }}
 render = {{ pixel_sampling = "centre" }}
 [axes]
 "atmosphere.turbidity" = {turbidities}
@@ -242,7 +242,7 @@ passes = 2
         directions = pixel_directions(scene.camera)
         theta = np.arccos(np.clip(directions[..., 2], -1.0, 1.0))
         gamma = view_sun_angle(scene.sun.direction[None], directions.reshape(-1, 3)).reshape(theta.shape)
-        radiance = truth.spectral_radiance(np.array(WAVELENGTHS), theta, gamma,
+        radiance = truth.spectral_radiance(np.array(wavelengths), theta, gamma,
                                                math.radians(90.0 - scene.sun.zenith_deg),
                                                atmosphere_turbidity(scene.atmosphere), scene.atmosphere.ground_albedo.value)
         store.write_region(index, {"radiance": radiance.astype(np.float32),
@@ -284,15 +284,15 @@ def run_cli(argv):
 def test_cli_fits_writes_and_evaluates(tmp_path, capsys):
     zeniths = [90.0 - math.degrees(e) for e in ELEVATIONS_6]
     # The published skies with every control point inside the fitter's bounds, so that a table of
-    # the fitter's family reproduces them.
-    batch = synthetic_batch(tmp_path, in_bounds(published_table()), [3.0], [0.0], zeniths)
+    # the fitter's family reproduces them; one band keeps the test short.
+    batch = synthetic_batch(tmp_path, in_bounds(published_table()), [3.0], [0.0], zeniths, wavelengths=[440.0])
     out = tmp_path / "coefficients"
-    assert run_cli(["--grid", str(batch), "--out", str(out), "--kinds", "spectral", "--no-perez", "-q"]) == 0
+    assert run_cli(["--grid", str(batch), "--out", str(out), "--no-perez", "-q"]) == 0
     printed = capsys.readouterr().out
     assert "noise of the data" in printed and "Hosek-Wilkie spectral: fitted" in printed
     tables, metadata = read_tables(out / "hosek.npz")
-    assert metadata["fits"]["spectral"]["channels_fitted"] == list(CHANNELS["spectral"][1:])
-    assert "Channels not fitted (start values kept): 320" in (out / "ArHosekSkyModelData_Spectral.h").read_text()
+    assert set(tables) == {"spectral"} and metadata["fits"]["spectral"]["channels_fitted"] == ["440"]
+    assert "Channels not fitted (start values kept): 320, 360, 400, 480" in (out / "ArHosekSkyModelData_Spectral.h").read_text()
     assert np.array_equal(tables["spectral"].coefficients[0], published_table().coefficients[0])
     # The fitted table reproduces the skies it was fitted to.
     training = load_batch_dataset(batch)["spectral"]
@@ -301,7 +301,7 @@ def test_cli_fits_writes_and_evaluates(tmp_path, capsys):
     assert run_cli(["--evaluate", str(out / "hosek.npz"), "--grid", str(batch), "--kinds", "spectral"]) == 0
     assert run_cli(["--evaluate", "published", "--grid", str(batch)]) == 0
     report = capsys.readouterr().out
-    assert "published Hosek-Wilkie 1.4a vs rgb ground truth" in report and "by elevation" in report
+    assert "published Hosek-Wilkie 1.4a vs spectral ground truth" in report and "by elevation" in report
 
 
 @pytest.mark.parametrize("call,name", [

@@ -48,11 +48,12 @@ from skyref.fit import forms
 #: eps of the positive part of F (see the module's documentation), relative to L_M.
 POSITIVE_EPSILON = 1e-6
 #: Levenberg–Marquardt tolerances (relative, absolute) on the steps and the residuals.
-RTOL, ATOL = 1e-9, 1e-12
-#: Most Levenberg–Marquardt steps per problem (per configuration; joint refinement).
-MAX_STEPS = (500, 500)
+RTOL, ATOL = 1e-7, 1e-10
+#: Most Levenberg–Marquardt steps per problem (per configuration: only a starting point for the
+#: curves; joint refinement).
+MAX_STEPS = (200, 500)
 #: Problems solved together in one vectorised call (per configuration; joint refinement).
-BATCH_SIZE = (256, 8)
+BATCH_SIZE = (256, 4)
 #: Weight of the joint refinement's gauge term per sky, log L_M(x) - log(mean radiance), against
 #: about one per direction for the sky's radiance (Hosek–Wilkie form; see the module's documentation).
 GAUGE_WEIGHT = 1.0
