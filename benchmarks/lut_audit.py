@@ -42,11 +42,14 @@ ROOT = os.path.normpath(os.path.join(os.path.dirname(os.path.abspath(__file__)),
 GRID = os.path.join(ROOT, "grids", "lut_audit.toml")
 RESULTS = os.path.join(ROOT, "results")
 
-#: The sweeps: per method, (label, options) pairs; the papers' defaults are {}.
+#: The sweeps: per method, (label, options) pairs; the papers' defaults are {} (their numbers are
+#: taken from the grid part when it has run). Bruneton's storage variants need no precomputation
+#: of their own: "float16" and "combined Mie" are the paper-default tables re-read through
+#: Bruneton2017.stored_as (see DERIVED), and report the precompute time of those tables.
 SWEEPS = {
     "bruneton2017": [("paper (32x128x32x8, 4 orders)", {}),
                      ("table x0.5", {"r_size": 16, "mu_size": 64, "mu_s_size": 16, "nu_size": 4}),
-                     ("table x1.5", {"r_size": 48, "mu_size": 192, "mu_s_size": 48, "nu_size": 12}),
+                     ("mu_s x2 (32x128x64x8)", {"mu_s_size": 64}),
                      ("1 order", {"scattering_orders": 1}), ("2 orders", {"scattering_orders": 2}),
                      ("8 orders", {"scattering_orders": 8}), ("float16", {"precision": "float16"}),
                      ("combined Mie", {"combined_mie": True})],
@@ -64,6 +67,12 @@ SWEEPS = {
                      ("single scattering only", {"multiple_scattering": False}),
                      ("float16", {"precision": "float16"})],
 }
+
+
+#: (method, sweep label) -> function of the paper-default method giving the variant.
+DERIVED = {("bruneton2017", "float16"): lambda method: method.stored_as(precision="float16"),
+           ("bruneton2017", "combined Mie"): lambda method: method.stored_as(combined_mie=True)}
+
 #: Skies of the sweeps: clear bruneton2017, observer 0 and 10 km, sun zenith 30, 80, 92 deg.
 SWEEP_SKIES = {"atmosphere": 0, "observer.altitude_m": (0.0, 10000.0), "sun.zenith_deg": (30.0, 80.0, 92.0)}
 
@@ -74,18 +83,25 @@ def truth_skies(grid, directory):
         yield spec.index, spec.coordinates, os.path.join(directory, "skies", f"{spec.sky_id}.exr")
 
 
-def evaluate(name, options, skies, log):
+def evaluate(name, options, skies, log, derive=None, built=None):
     """Audit method ``name`` with ``options`` on ``skies`` (list of (index, coordinates, path)),
-    building it once per atmosphere. Returns one row per sky."""
+    building it once per atmosphere; with ``derive``, audit ``derive(method)`` instead, and keep
+    the built methods in the dict ``built`` (atmosphere key -> method) for reuse. Returns one row
+    per sky."""
     rows = []
+    built = {} if built is None else built
     method, atmosphere_key = None, None
     for index, coordinates, path in skies:
         truth = read_sky_exr(path)
         scene = truth.scene
         key = json.dumps(scene.atmosphere.to_dict(), sort_keys=True)
         if key != atmosphere_key:
-            method = lut_method(name, scene.atmosphere, scene.wavelengths_nm, **options)
-            precompute_s = method.precompute()
+            if key not in built:
+                built.clear()   # one atmosphere's tables at a time
+                built[key] = lut_method(name, scene.atmosphere, scene.wavelengths_nm, **options)
+                built[key].precompute()
+            method = derive(built[key]) if derive else built[key]
+            precompute_s = built[key].precompute_seconds
             atmosphere_key = key
             log(f"  {name} {options or ''}: precompute {precompute_s:.1f} s ({scene.atmosphere.name})")
         found = compare(method, truth, scene)
@@ -193,9 +209,18 @@ def sweep(grid, directory, name, log):
              if s[1]["atmosphere"] == grid.axes["atmosphere"][SWEEP_SKIES["atmosphere"]]
              and s[1]["observer.altitude_m"] in SWEEP_SKIES["observer.altitude_m"]
              and s[1]["sun.zenith_deg"] in SWEEP_SKIES["sun.zenith_deg"]]
+    grid_rows = {r["index"]: r for r in _load("grid").get(name, [])}
+    default = {}   # the paper-default method, built once for the derived variants
     points = []
     for label, options in SWEEPS[name]:
-        rows = evaluate(name, options, skies, log)
+        derive = DERIVED.get((name, label))
+        if not options and all(index in grid_rows for index, _, _ in skies):
+            log(f"  {name} {label}: from the grid part")
+            rows = [grid_rows[index] for index, _, _ in skies]
+        elif derive is not None:
+            rows = evaluate(name, {}, skies, log, derive=derive, built=default)
+        else:
+            rows = evaluate(name, options, skies, log, built=default if not options else None)
         points.append({"method": name, "label": label, "options": options,
                        "precompute_s": rows[0]["precompute_s"],
                        "lookup_ns": float(np.median([r["lookup_ns"] for r in rows])),

@@ -33,6 +33,8 @@ import math
 import numpy as np
 import pytest
 
+from skyref.errors import ParameterError
+
 WL = [680.0, 550.0, 440.0]
 R_GROUND, R_TOP = 6_360_000.0, 6_420_000.0
 SMALL = dict(r_size=8, mu_size=32, mu_s_size=8, nu_size=4)
@@ -329,10 +331,16 @@ def test_float16_tables_stay_close_to_float32(mi):
     these 228 views: 2.5e-4 .. 6.7e-4 for the sun at 30 and 80 deg from 0, 3 km and space (on a
     finer grid up to 7e-3 in dim limb directions from space under the sun at 80 deg)."""
     views = daylight_views()
-    luts = {}
-    for precision in ("float32", "float16"):
-        luts[precision] = method(mi, precision=precision, max_sun_zenith_deg=120.0, scattering_orders=3, **SMALL)
-        luts[precision].precompute()
+    luts = {"float32": method(mi, max_sun_zenith_deg=120.0, scattering_orders=3, **SMALL)}
+    luts["float32"].precompute()
+    luts["float16"] = direct = method(mi, precision="float16", max_sun_zenith_deg=120.0, scattering_orders=3, **SMALL)
+    direct.precompute()
+    # The float32 tables re-stored in float16 are close to the tables precomputed in float16 (those
+    # also round the intermediate orders' tables).
+    restored = luts["float32"].stored_as(precision="float16")
+    assert restored.precision == "float16" and restored.precompute_seconds == luts["float32"].precompute_seconds
+    a, b = lut_radiance(restored, 30.0, 0.0, views), lut_radiance(direct, 30.0, 0.0, views)
+    assert not np.array_equal(a, b) and np.abs(a / b - 1.0).max() < 1e-3
     for sun_zenith in (30.0, 80.0):
         for observer_m in (0.0, 3000.0, 1.0e6):
             single = lut_radiance(luts["float32"], sun_zenith, observer_m, views)
@@ -381,6 +389,11 @@ def test_combined_mie_extrapolation(mi):
         assert np.array_equal(a[:, 0], b[:, 0])
         lit = a > 1e-3 * a.max()
         assert np.abs(b[lit] / a[lit] - 1.0).max() < bound
+    # Combining the separate tables afterwards gives the combined precomputation; not the reverse.
+    assert np.array_equal(lut_radiance(separate.stored_as(combined_mie=True), 30.0, 0.0, views),
+                          lut_radiance(combined, 30.0, 0.0, views))
+    with pytest.raises(ParameterError, match="combined_mie"):
+        combined.stored_as(combined_mie=False)
 
 
 # --- the paper's configuration and beyond (slow) ----------------------------------------------------

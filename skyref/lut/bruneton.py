@@ -607,6 +607,25 @@ class Bruneton2017(LutMethod):
             out["single_mie"] = self.single_mie.numpy()
         return out
 
+    def stored_as(self, precision: str | None = None, combined_mie: bool | None = None) -> "Bruneton2017":
+        """These tables stored differently, without precomputing again: ``precision`` "float16"
+        or "float32", and/or ``combined_mie`` True (single Mie kept only for channel 0, the
+        paper's alpha channel; a combined table cannot be split again). The lowest sun stays
+        this method's; ``precompute_seconds`` is this method's."""
+        tables = self.tables()
+        if combined_mie is not None and combined_mie != self.combined_mie:
+            if not combined_mie:
+                raise ParameterError("combined_mie", False, "true, or the tables' own setting",
+                                     "combined tables lack single Mie of all but channel 0")
+            tables["scattering"] = np.concatenate([tables["scattering"], tables.pop("single_mie")[..., :1]], axis=-1)
+        method = type(self).from_tables(self.atmosphere, self.wavelengths_nm, mu_s_size=self.mu_s_size,
+                                        precision=precision or self.precision,
+                                        sun_angular_radius_deg=float(np.degrees(self.sun_angular_radius)),
+                                        max_sun_zenith_deg=self.max_sun_zenith_deg, **tables)
+        method.scattering_orders = self.scattering_orders
+        method.precompute_seconds = self.precompute_seconds
+        return method
+
     @classmethod
     def from_tables(cls, atmosphere, wavelengths_nm, transmittance, scattering, irradiance, single_mie=None, *,
                     mu_s_size: int = 32, precision: str = "float32",
