@@ -7,6 +7,7 @@ one line that names the problem (no traceback).
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 import numpy as np
@@ -78,7 +79,6 @@ def cmd_info(args) -> int:
 def _check_output(path: str, suffix: str, option: str) -> None:
     """Fail before any work if ``path`` has the wrong extension or its directory cannot be
     created or written (probed with a temporary file that is removed again)."""
-    import os
     import tempfile
 
     if not path.lower().endswith(suffix):
@@ -147,17 +147,23 @@ def _option_value(text: str):
 
 
 def cmd_audit(args) -> int:
-    import os
-
+    from skyref.analytic import MODELS, analytic_model
     from skyref.audit.audit import audit, summary_table, write_report
-    from skyref.lut import lut_method, method_class
+    from skyref.lut import METHODS, lut_method, method_class
     from skyref.scene import load_scene
 
+    if args.method not in METHODS and args.method not in MODELS:
+        raise ParameterError("--method", args.method, ", ".join([*METHODS, *MODELS]), "unknown method")
+    if args.tables and args.method not in METHODS:
+        raise ParameterError("--tables", args.tables, "a LUT method (" + ", ".join(METHODS) + ")",
+                             f"{args.method} has no tables")
     scene = load_scene(args.scene)
     options = dict(_option_value(o) for o in args.option or [])
     if args.tables:
         arrays = dict(np.load(args.tables))
         method = method_class(args.method).from_tables(scene.atmosphere, scene.wavelengths_nm, **arrays, **options)
+    elif args.method in MODELS:
+        method = analytic_model(args.method, scene.atmosphere, scene.wavelengths_nm, **options)
     else:
         method = lut_method(args.method, scene.atmosphere, scene.wavelengths_nm, **options)
     directory = args.out or os.path.join("out", "audit", f"{args.method}-{scene.name}")
@@ -168,6 +174,40 @@ def cmd_audit(args) -> int:
     print("\n".join(summary_table(result)))
     print(f"precompute {result.precompute_s:.2f} s, lookup {1e9 * result.lookup_s_per_direction:.0f} ns/direction; "
           f"report: {path}")
+    return 0
+
+
+def cmd_report(args) -> int:
+    from skyref.audit.map_report import write_map_report
+    from skyref.audit.speed_map import ENTRIES, entry_summary, evaluate_map, fitted_entries, truth_skies
+    from skyref.batch import load_grid, run_batch
+
+    grid = load_grid(args.truth_grid)
+    log = (lambda *_: None) if args.quiet else print
+    manifest = run_batch(grid, log=log)
+    if manifest["skies_finished"] != len(grid):
+        print(f"skyref report: ground truth incomplete ({manifest['skies_finished']}/{len(grid)} skies); "
+              "run again to resume", file=sys.stderr)
+        return 1
+    entries = list(ENTRIES) + fitted_entries(args.coefficients)
+    skies = truth_skies(grid)
+    rows = evaluate_map(entries, skies, args.cache, log=log)
+    path = write_map_report(entries, skies, rows, entry_summary(rows), args.cache, args.results)
+    print(f"report: {path}")
+    return 0
+
+
+def cmd_advise(args) -> int:
+    from skyref.audit.advise import advice_lines, load_map, parse_tolerance
+    from skyref.scene import load_scene
+    from skyref.atmosphere.validation import check_int
+
+    tolerance = parse_tolerance(args.tolerance)
+    directions = check_int("--directions", args.directions, 1, 1 << 40)
+    frames = check_int("--frames", args.frames, 1, 1 << 30)
+    summaries = load_map(args.map)
+    scene = load_scene(args.scene)
+    print("\n".join(advice_lines(summaries, scene, tolerance, directions, frames)))
     return 0
 
 
@@ -204,8 +244,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.set_defaults(run=cmd_batch)
 
-    p = sub.add_parser("audit", help="audit a LUT method against the ground truth on a scene")
-    p.add_argument("--method", required=True, help="bruneton2017, elek2009 or hillaire2020")
+    p = sub.add_parser("audit", help="audit a LUT method or analytic model against the ground truth on a scene")
+    p.add_argument("--method", required=True, help="a LUT method (bruneton2017, elek2009, hillaire2020) or an "
+                   "analytic model (preetham1999, hoffman_preetham2002, nielsen2003, nishita1993, oneil2005, hosek2012)")
     p.add_argument("--scene", required=True, help="scene TOML file (atmosphere, sun, observer, camera, wavelengths)")
     p.add_argument("--option", action="append", metavar="NAME=VALUE",
                    help="a method option, e.g. scattering_orders=8 or precision=float16 (repeatable)")
@@ -215,6 +256,25 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--out", help="report directory (default out/audit/METHOD-SCENE)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress messages")
     p.set_defaults(run=cmd_audit)
+
+    from skyref.audit.speed_map import TRUTH_GRID
+
+    p = sub.add_parser("report", help="the speed-vs-error map of every method: results/README.md, plots, map.json")
+    p.add_argument("--truth-grid", default=TRUTH_GRID, help="grid of the ground-truth skies")
+    p.add_argument("--coefficients", default=os.path.join("out", "hosek-coefficients"),
+                   help="directory of fitted Hosek-Wilkie / Perez tables ('skyref fit --out'), included if present")
+    p.add_argument("--cache", default=os.path.join("out", "report", "cache"), help="cache of (method, sky) results")
+    p.add_argument("--results", default="results", help="where README.md and report/ are written")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress messages")
+    p.set_defaults(run=cmd_report)
+
+    p = sub.add_parser("advise", help="the cheapest method meeting an error tolerance for a scene, from the map")
+    p.add_argument("--scene", required=True, help="scene TOML file")
+    p.add_argument("--tolerance", required=True, help="sky luminance RMS error, e.g. 2%% or 0.02")
+    p.add_argument("--map", default=os.path.join("results", "report", "map.json"), help="map written by 'skyref report'")
+    p.add_argument("--directions", type=int, default=1920 * 1080, help="directions per frame (default 1920x1080)")
+    p.add_argument("--frames", type=int, default=1, help="frames with the same atmosphere (precompute paid once)")
+    p.set_defaults(run=cmd_advise)
 
     from skyref.fit.cli import add_fit_parser
 

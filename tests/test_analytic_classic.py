@@ -488,6 +488,7 @@ def test_oneil_refit_and_convergence():
 
 def models_for(atmosphere):
     from skyref.analytic.hoffman_preetham import HoffmanPreetham2002
+    from skyref.analytic.hosek_sky import HosekWilkie2012
     from skyref.analytic.nielsen import Nielsen2003
     from skyref.analytic.nishita93 import Nishita1993
     from skyref.analytic.oneil import ONeil2005
@@ -498,7 +499,8 @@ def models_for(atmosphere):
               "hoffman_preetham2002": lambda: HoffmanPreetham2002(atmosphere, WL),
               "nielsen2003": lambda: Nielsen2003(atmosphere, WL),
               "nishita1993": lambda: Nishita1993(atmosphere, WL, shells=16, sun_nodes=16),
-              "oneil2005": lambda: ONeil2005(atmosphere, WL)}
+              "oneil2005": lambda: ONeil2005(atmosphere, WL),
+              "hosek2012 (T=3)": lambda: HosekWilkie2012(atmosphere, WL, turbidity=3.0)}
     for label, make in makers.items():
         try:
             yield label, built(make())
@@ -518,7 +520,8 @@ def test_hard_cases_finite_and_non_negative_or_refused(turbidity):
     """Every model, on molecules only (T = 1), the clear preset, T = 10 and T = 30, for suns from the
     zenith to the nadir (grazing, twilight, night), observers on the ground, at 10 m, 30 km and
     1000 km: the radiance is finite and non-negative, or the model refuses with a ParameterError
-    (Preetham outside its turbidity, sun and observer ranges; NaN only below its horizon)."""
+    (Preetham outside its turbidity, sun and observer ranges, NaN only below its horizon; the
+    Hosek–Wilkie sky outside its sun and observer ranges)."""
     from skyref.atmosphere import rayleigh_only
 
     atmosphere = rayleigh_only() if turbidity == 1.0 else bruneton(turbidity)
@@ -533,7 +536,7 @@ def test_hard_cases_finite_and_non_negative_or_refused(turbidity):
             try:
                 out = model.radiance(views, direction(sun_zenith, 180.0), altitude)
             except ParameterError:
-                assert label.startswith("preetham")
+                assert label.startswith(("preetham", "hosek"))   # sun or observer outside their data
                 continue
             allowed_nan = np.isnan(out) & (views[:, 2] < 0.0)[:, None] if label.startswith("preetham") else False
             assert np.all(np.isfinite(out) | allowed_nan), (label, sun_zenith, altitude)

@@ -1,5 +1,5 @@
-"""`skyref audit` end to end: a small Bruneton 2017 table audited directly, and the same
-tables audited as if computed elsewhere (--tables, the paper's texture layout)."""
+"""`skyref audit` end to end: a small Bruneton 2017 table audited directly, the same tables
+audited as if computed elsewhere (--tables, the paper's texture layout), and an analytic model."""
 
 import json
 
@@ -60,4 +60,20 @@ def test_audit_cli_rejects_an_unknown_method(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     (tmp_path / "tiny.toml").write_text(SCENE)
     assert main(["audit", "--method", "bruneton2018", "--scene", "tiny.toml"]) == 2
-    assert "method = 'bruneton2018'" in capsys.readouterr().err
+    assert "--method = 'bruneton2018'" in capsys.readouterr().err
+    assert main(["audit", "--method", "preetham1999", "--scene", "tiny.toml", "--tables", "x.npz"]) == 2
+    assert "--tables" in capsys.readouterr().err
+
+
+def test_audit_cli_audits_an_analytic_model(mi, tmp_path, monkeypatch, capsys):
+    """An analytic model joins the audit like a LUT method; its options pass through --option."""
+    from skyref.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "tiny.toml").write_text(SCENE)
+    assert main(["audit", "--method", "nishita1993", "--scene", "tiny.toml", "--option", "shells=8",
+                 "--max-spp", "256", "-q", "-o", "nishita"]) == 0
+    assert "| sky |" in capsys.readouterr().out
+    summary = json.load(open(tmp_path / "nishita" / "summary.json"))
+    # Single scattering only: darker than the truth's full multiple scattering on average.
+    assert summary["statistics"]["sky"]["luminance"]["mean"] < 0.0

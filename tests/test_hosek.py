@@ -188,3 +188,57 @@ def test_error_message_states_the_range():
 
 def test_channels_of_each_kind():
     assert CHANNELS["xyz"] == ("X", "Y", "Z") and len(published_table("rgb").channels) == 3
+
+
+# --- the Hosek–Wilkie sky on a skyref atmosphere ---------------------------------------------------
+
+def test_hosek_sky_looks_up_the_table_along_the_view_geometry():
+    """HosekWilkie2012 on an atmosphere: the radiance along a view is the table's at the view's
+    zenith angle theta and sun angle gamma (computed here from the directions), the solar
+    elevation, the atmosphere's turbidity and its albedo at 550 nm; above 720 nm the 720 nm band."""
+    from skyref.analytic.hosek_sky import HosekWilkie2012
+    from skyref.atmosphere import from_turbidity
+    from skyref.scene import direction_from_angles
+
+    atmosphere = from_turbidity(4.0)
+    wavelengths = np.array([400.0, 550.0, 700.0, 760.0])
+    sky = HosekWilkie2012(atmosphere, wavelengths)
+    sky.precompute()
+    views = direction_from_angles(np.array([0.0, 45.0, 80.0, 89.0]), np.array([0.0, 100.0, 180.0, 270.0]))
+    sun = direction_from_angles(np.array(35.0), np.array(180.0))
+    out = sky.radiance(views, sun, 0.0)
+    theta = np.radians([0.0, 45.0, 80.0, 89.0])
+    gamma = np.arccos(np.clip(views @ sun, -1.0, 1.0))
+    table = published_table("spectral")
+    expected = table.spectral_radiance(np.array([400.0, 550.0, 700.0, 720.0]), theta, gamma, math.radians(55.0),
+                                       4.0, 0.1)
+    np.testing.assert_allclose(out, expected, rtol=1e-9)
+    assert sky.turbidity == pytest.approx(4.0) and sky.albedo == pytest.approx(0.1)
+
+
+@pytest.mark.parametrize("change,name", [
+    (dict(wavelengths_nm=[300.0, 550.0]), "wavelengths_nm"),
+    (dict(turbidity=12.0), "turbidity"),
+    (dict(atmosphere_turbidity=12.0), "turbidity"),
+])
+def test_hosek_sky_refuses_what_its_data_do_not_cover(change, name):
+    from skyref.analytic.hosek_sky import HosekWilkie2012
+    from skyref.atmosphere import from_turbidity
+
+    atmosphere = from_turbidity(change.pop("atmosphere_turbidity", 3.0))
+    with pytest.raises(ParameterError, match=name):
+        HosekWilkie2012(atmosphere, change.pop("wavelengths_nm", [550.0]), **change)
+
+
+def test_hosek_sky_refuses_observers_and_suns_outside_its_data():
+    from skyref.analytic.hosek_sky import HosekWilkie2012
+    from skyref.atmosphere import preset
+    from skyref.scene import direction_from_angles
+
+    sky = HosekWilkie2012(preset("bruneton2017"), [550.0])
+    sky.precompute()
+    views = direction_from_angles(np.array([30.0]), np.array([0.0]))
+    with pytest.raises(ParameterError, match="observer_altitude_m"):
+        sky.radiance(views, direction_from_angles(np.array(30.0), np.array(0.0)), 5000.0)
+    with pytest.raises(ParameterError, match="sun zenith"):
+        sky.radiance(views, direction_from_angles(np.array(95.0), np.array(0.0)), 0.0)
