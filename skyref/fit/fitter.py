@@ -97,6 +97,20 @@ def default_start(form: str, kind: str) -> CoefficientTable:
 
 # --- JAX pieces -------------------------------------------------------------------------------
 
+def _levenberg_marquardt():
+    """optimistix's Levenberg–Marquardt solving each damped step through the normal equations
+    (J^T J + lambda I) delta = J^T r by Cholesky: the problems have far more residuals than
+    parameters (joint refinement: ~14,000 x 60), and forming the small normal matrix is ~20x
+    faster here than the default QR of the tall augmented Jacobian (measured on 2 CPU cores:
+    4 joint problems, 100 steps, 11.6 s -> 0.5 s). Conditioning is squared; in float64 with
+    bounded coefficients that costs nothing measurable (tests/test_fit.py recovers known
+    tables to 1e-6)."""
+    import lineax as lx
+    import optimistix as optx
+
+    return optx.LevenbergMarquardt(rtol=RTOL, atol=ATOL, linear_solver=lx.Normal(lx.Cholesky()))
+
+
 def _positive(f, xp):
     """0.5 (f + sqrt(f^2 + 4 eps^2)): f where f >> eps, smoothly positive everywhere."""
     return 0.5 * (f + xp.sqrt(f * f + 4.0 * POSITIVE_EPSILON ** 2))
@@ -120,7 +134,7 @@ def _configuration_solver(form: str, fit_scale: bool):
         offset = u[n] if fit_scale else 0.0
         return sqrt_weight * (log_f + offset - target)
 
-    solver = optx.LevenbergMarquardt(rtol=RTOL, atol=ATOL)
+    solver = _levenberg_marquardt()
 
     def solve(u, gamma, target, sqrt_weight, cos_theta):
         solution = optx.least_squares(residuals, solver, u, args=(gamma, target, sqrt_weight, cos_theta),
@@ -157,7 +171,7 @@ def _joint_solver(form: str):
         gauge = sqrt_gauge * (log_scale - jnp.log(mean_radiance))
         return jnp.concatenate([sky.ravel(), gauge])
 
-    solver = optx.LevenbergMarquardt(rtol=RTOL, atol=ATOL)
+    solver = _levenberg_marquardt()
 
     def solve(u, radiance_points, x, gamma, target, sqrt_weight, mean_radiance, sqrt_gauge, cos_theta):
         solution = optx.least_squares(residuals, solver, jnp.concatenate([u.ravel(), radiance_points]),
