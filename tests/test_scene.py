@@ -245,6 +245,14 @@ def test_atomic_write_replaces_on_success(tmp_path):
         assert not path.exists()
     assert path.read_bytes() == b"\x00\x01new"
     assert os.listdir(path.parent) == ["data.bin"]
+    # The permissions of a file made by open(), not mkstemp's owner-only 0600.
+    mask = os.umask(0o022)
+    try:
+        with atomic_write(path, "wb") as f:
+            f.write(b"again")
+    finally:
+        os.umask(mask)
+    assert path.stat().st_mode & 0o777 == 0o644
 
 
 def test_atomic_path_keeps_extension_and_cleans_up(tmp_path):

@@ -8,10 +8,18 @@ import os
 import tempfile
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
 @contextlib.contextmanager
 def atomic_path(path):
     """A temporary path beside ``path`` (same extension, so libraries that pick a format from
-    it still do); on success it is fsynced and renamed over ``path``, on error removed."""
+    it still do); on success it is fsynced, given the permissions of a file created with
+    ``open()`` (0666 less the umask; mkstemp makes it 0600) and renamed over ``path``, on error
+    removed."""
     path = os.fspath(path)
     directory = os.path.dirname(os.path.abspath(path))
     os.makedirs(directory, exist_ok=True)
@@ -22,6 +30,7 @@ def atomic_path(path):
         yield tmp
         with open(tmp, "rb") as f:
             os.fsync(f.fileno())
+        os.chmod(tmp, 0o666 & ~_umask())
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
