@@ -42,8 +42,10 @@ ROOT = os.path.normpath(os.path.join(os.path.dirname(os.path.abspath(__file__)),
 GRID = os.path.join(ROOT, "grids", "lut_audit.toml")
 RESULTS = os.path.join(ROOT, "results")
 
-#: The sweeps: per method, (label, options) pairs; the papers' defaults are {} (their numbers are
-#: taken from the grid part when it has run). Bruneton's storage variants need no precomputation
+#: The sweeps: per method, (label, options[, atmosphere]) entries; the papers' defaults are {}
+#: (their numbers are taken from the grid part when it has run); the atmosphere is an index on the
+#: grid's atmosphere axis (default 0, clear; 1: turbidity 6, where Bruneton's 50 samples along
+#: rays under-resolve the dense haze near the ground). Bruneton's storage variants need no precomputation
 #: of their own: "float16" and "combined Mie" are the paper-default tables re-read through
 #: Bruneton2017.stored_as (see DERIVED), and report the precompute time of those tables.
 SWEEPS = {
@@ -52,7 +54,11 @@ SWEEPS = {
                      ("mu_s x2 (32x128x64x8)", {"mu_s_size": 64}),
                      ("1 order", {"scattering_orders": 1}), ("2 orders", {"scattering_orders": 2}),
                      ("float16", {"precision": "float16"}),
-                     ("combined Mie", {"combined_mie": True})],
+                     ("combined Mie", {"combined_mie": True}),
+                     ("paper (hazy)", {}, 1),
+                     ("table x0.5 (hazy)", {"r_size": 16, "mu_size": 64, "mu_s_size": 16, "nu_size": 4}, 1),
+                     ("table x0.5, 500 samples along rays (hazy)", {"r_size": 16, "mu_size": 64, "mu_s_size": 16,
+                                                                    "nu_size": 4, "integration_samples": 500}, 1)],
     "elek2009": [("paper (32x128x32, 4 orders)", {}),
                  ("table x0.5", {"scattering_size": (16, 64, 16)}),
                  ("table x2", {"scattering_size": (64, 256, 64)}),
@@ -204,15 +210,17 @@ def plot_grid(grid, rows_by_method, path):
 
 
 def sweep(grid, directory, name, log):
-    """The sweep points of method ``name`` (see SWEEPS) on the sweep skies."""
-    skies = [s for s in truth_skies(grid, directory)
-             if s[1]["atmosphere"] == grid.axes["atmosphere"][SWEEP_SKIES["atmosphere"]]
-             and s[1]["observer.altitude_m"] in SWEEP_SKIES["observer.altitude_m"]
-             and s[1]["sun.zenith_deg"] in SWEEP_SKIES["sun.zenith_deg"]]
+    """The sweep points of method ``name`` (see SWEEPS) on the sweep skies of each entry's
+    atmosphere."""
     grid_rows = {r["index"]: r for r in _load("grid").get(name, [])}
     default = {}   # the paper-default method, built once for the derived variants
     points = []
-    for label, options in SWEEPS[name]:
+    for label, options, *rest in SWEEPS[name]:
+        atmosphere = rest[0] if rest else SWEEP_SKIES["atmosphere"]
+        skies = [s for s in truth_skies(grid, directory)
+                 if s[1]["atmosphere"] == grid.axes["atmosphere"][atmosphere]
+                 and s[1]["observer.altitude_m"] in SWEEP_SKIES["observer.altitude_m"]
+                 and s[1]["sun.zenith_deg"] in SWEEP_SKIES["sun.zenith_deg"]]
         derive = DERIVED.get((name, label))
         if not options and all(index in grid_rows for index, _, _ in skies):
             log(f"  {name} {label}: from the grid part")
@@ -221,7 +229,7 @@ def sweep(grid, directory, name, log):
             rows = evaluate(name, {}, skies, log, derive=derive, built=default)
         else:
             rows = evaluate(name, options, skies, log, built=default if not options else None)
-        points.append({"method": name, "label": label, "options": options,
+        points.append({"method": name, "label": label, "options": options, "atmosphere": atmosphere,
                        "precompute_s": rows[0]["precompute_s"],
                        "lookup_ns": float(np.median([r["lookup_ns"] for r in rows])),
                        "sky_rms": _median(rows, "sky", "luminance", "rms"),
@@ -318,8 +326,10 @@ def write_report(grid):
              *grid_tables(grid, rows_by_method), "![error vs sun zenith](lut_audit/error_vs_sun.png)", ""]
     if points:
         lines += ["## Sweeps: speed against error", "",
-                  "Clear bruneton2017 atmosphere, observer 0 and 10 km, sun zenith 30, 80 and 92 deg (6 skies); "
-                  "errors are medians over them (noise-corrected RMS of the sky's relative luminance error).", "",
+                  "Bruneton 2017's atmosphere, clear unless marked (hazy): turbidity 6; observer 0 and 10 km, sun "
+                  "zenith 30, 80 and 92 deg (6 skies); errors are medians over them (noise-corrected RMS of the "
+                  "sky's relative luminance error). Precompute times of storage variants (float16, combined Mie) "
+                  "are those of the float32 tables they re-store.", "",
                   "| method | setting | precompute (s) | lookup (ns/dir) | sky RMS (%) | sky p95 (%) | CIEDE2000 p95 |",
                   "|---|---|---:|---:|---:|---:|---:|"]
         lines += [f"| {p['method']} | {p['label']} | {p['precompute_s']:.1f} | {p['lookup_ns']:.0f} | "

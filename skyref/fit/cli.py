@@ -47,7 +47,7 @@ def _kinds(text: str, available) -> list[str]:
     return chosen
 
 
-def _noise_line(training) -> str:
+def noise_line(training) -> str:
     noise = training.relative_noise()
     finite = noise[np.isfinite(noise)]
     if finite.size == 0:
@@ -112,7 +112,7 @@ def _evaluate(args, training_sets) -> int:
         raise ParameterError("--evaluate", args.evaluate, "a table of a kind in the dataset: " +
                              ", ".join(training_sets), "no matching table")
     for kind in kinds:
-        print(_noise_line(training_sets[kind]))
+        print(noise_line(training_sets[kind]))
         print("\n".join(_summary_lines(name, tables[kind], training_sets[kind])))
     return 0
 
@@ -132,7 +132,7 @@ def _fit(args, training_sets) -> int:
         for kind in kinds:
             training = training_sets[kind]
             if form == "hosek":
-                print(_noise_line(training))
+                print(noise_line(training))
             result = fit_table(training, form=form, joint=not args.no_joint, progress=progress)
             tables[kind] = result.table
             unfitted = [f"{channel}" for channel, done in zip(result.table.channels, result.fitted.any(axis=(1, 2)))
