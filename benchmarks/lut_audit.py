@@ -51,7 +51,6 @@ RESULTS = os.path.join(ROOT, "results")
 SWEEPS = {
     "bruneton2017": [("paper (32x128x32x8, 4 orders)", {}),
                      ("table x0.5", {"r_size": 16, "mu_size": 64, "mu_s_size": 16, "nu_size": 4}),
-                     ("mu_s x2 (32x128x64x8)", {"mu_s_size": 64}),
                      ("1 order", {"scattering_orders": 1}), ("2 orders", {"scattering_orders": 2}),
                      ("float16", {"precision": "float16"}),
                      ("combined Mie", {"combined_mie": True}),
