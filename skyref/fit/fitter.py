@@ -8,7 +8,8 @@ stages, each jit-compiled and vectorised (``jax.vmap``) over its independent pro
 1. **Per configuration** (each sky and channel): the overall radiance L_M is the sky's mean
    radiance (solid-angle weighted over the fitted directions, Hosek & Wilkie's "expected value
    of radiance"), and the n coefficients of F are fitted to log(L / L_M), starting from the start
-   table's configuration. A form without scale coefficients (Perez) also fits log L_M's offset.
+   table's configuration and lightly pulled towards it (:data:`PRIOR_WEIGHT`), so that directions
+   the data leave undetermined vary smoothly with elevation. A form without scale coefficients (Perez) also fits log L_M's offset.
 2. **Bezier curves**: per albedo, turbidity, channel and coefficient, the six control points that
    fit the per-configuration values over x = (elevation / (pi/2))^(1/3) in least squares
    (linear), moved inside the bounds; the same for L_M. Needs at least six distinct elevations.
@@ -51,9 +52,15 @@ POSITIVE_EPSILON = 1e-6
 RTOL, ATOL = 1e-7, 1e-10
 #: Most Levenberg–Marquardt steps per problem (per configuration: only a starting point for the
 #: curves; joint refinement).
-MAX_STEPS = (200, 500)
+MAX_STEPS = (200, 200)
 #: Problems solved together in one vectorised call (per configuration; joint refinement).
 BATCH_SIZE = (256, 4)
+#: Weight of stage 1's pull of each (unbounded) coefficient towards the start table's value,
+#: against about one per direction for the data. The form is degenerate where the data do not
+#: decide (e.g. C + D exp(E gamma) with E -> 0 trades C against D); unregularised, such
+#: coefficients wander between neighbouring elevations (C from -16 to +1 between 3 and 18 deg on
+#: skyref's turbidity-1 skies) and their Bezier curve then describes no sky at all.
+PRIOR_WEIGHT = 1.0
 #: Weight of the joint refinement's gauge term per sky, log L_M(x) - log(mean radiance), against
 #: about one per direction for the sky's radiance (Hosek–Wilkie form; see the module's documentation).
 GAUGE_WEIGHT = 1.0
@@ -128,16 +135,17 @@ def _configuration_solver(form: str, fit_scale: bool):
     shape_function = FORMS[form][1]
 
     def residuals(u, args):
-        gamma, target, sqrt_weight, cos_theta = args
+        gamma, target, sqrt_weight, cos_theta, u_start = args
         coefficients = forms.from_unbounded(form, u[:n], jnp)
         log_f = jnp.log(_positive(shape_function(coefficients, cos_theta, gamma, jnp), jnp))
         offset = u[n] if fit_scale else 0.0
-        return sqrt_weight * (log_f + offset - target)
+        prior = math.sqrt(PRIOR_WEIGHT) * (u[:n] - u_start[:n])
+        return jnp.concatenate([sqrt_weight * (log_f + offset - target), prior])
 
     solver = _levenberg_marquardt()
 
     def solve(u, gamma, target, sqrt_weight, cos_theta):
-        solution = optx.least_squares(residuals, solver, u, args=(gamma, target, sqrt_weight, cos_theta),
+        solution = optx.least_squares(residuals, solver, u, args=(gamma, target, sqrt_weight, cos_theta, u),
                                       max_steps=MAX_STEPS[0], throw=False)
         return solution.value, solution.result == optx.RESULTS.successful, solution.stats["num_steps"]
 
