@@ -52,7 +52,7 @@ POSITIVE_EPSILON = 1e-6
 RTOL, ATOL = 1e-7, 1e-10
 #: Most Levenberg–Marquardt steps per problem (per configuration: only a starting point for the
 #: curves; joint refinement).
-MAX_STEPS = (200, 200)
+MAX_STEPS = (200, 500)
 #: Problems solved together in one vectorised call (per configuration; joint refinement).
 BATCH_SIZE = (256, 4)
 #: Weight of stage 1's pull of each (unbounded) coefficient towards the start table's value,
