@@ -280,6 +280,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_fit_parser(sub)
 
+    from skyref.invert.cli import add_invert_parser
+
+    add_invert_parser(sub)
+
     p = sub.add_parser("info", help="versions, libLLVM, Mitsuba variants, presets")
     p.set_defaults(run=cmd_info)
     return parser
