@@ -229,13 +229,18 @@ def evaluate_map(entries, skies, cache_dir: str, log=print) -> list[dict]:
     from skyref.io.exr import read_sky_exr
 
     os.makedirs(cache_dir, exist_ok=True)
-    rows = []
-    built = {}   # (method, options, atmosphere index) -> precomputed method, for stored_as entries
+    rows = {}
+    built = {}   # (method, options, atmosphere index) -> precomputed method, kept for stored_as entries
     for entry in entries:
-        for sky_index, (sky, path) in enumerate(skies):
+        base = (entry.method, json.dumps(entry.options, sort_keys=True))
+        built = {k: v for k, v in built.items() if k[:2] == base}
+        # Skies grouped by atmosphere: each atmosphere's tables are precomputed once per entry.
+        order = sorted(range(len(skies)), key=lambda i: skies[i][0].atmosphere)
+        for sky_index in order:
+            sky, path = skies[sky_index]
             cached = cache_path(cache_dir, entry, sky)
             if os.path.exists(cached):
-                rows.append(load_cached(cached)[0])
+                rows[entry.key, sky_index] = load_cached(cached)[0]
                 continue
             truth = read_sky_exr(path)
             scene = truth.scene
@@ -245,30 +250,28 @@ def evaluate_map(entries, skies, cache_dir: str, log=print) -> list[dict]:
                 if entry.family == "path tracer":
                     method = PathTracerView(scene, entry.options["spp"], seed=(1 << 30) + sky_index)
                 else:
-                    base_key = (entry.method, json.dumps(entry.options, sort_keys=True), sky.atmosphere)
-                    if base_key not in built:
-                        base = build_method(entry, scene.atmosphere, scene.wavelengths_nm)
-                        base.precompute()
-                        log(f"  {entry.key}: precompute {base.precompute_seconds:.2f} s ({sky.name})")
-                        built = {k: v for k, v in built.items() if k[2] == sky.atmosphere}
-                        built[base_key] = base
-                    method = built[base_key]
+                    key = base + (sky.atmosphere,)
+                    if key not in built:
+                        built[key] = build_method(entry, scene.atmosphere, scene.wavelengths_nm)
+                        built[key].precompute()
+                        log(f"  {entry.key}: precompute {built[key].precompute_seconds:.2f} s ({scene.atmosphere.name})")
+                    method = built[key]
                     if entry.stored_as is not None:
                         method = method.stored_as(**entry.stored_as)
                 found = compare(method, truth, scene)
             except ParameterError as error:
                 row["refused"] = str(error)
                 save_cached(cached, row, None)
-                rows.append(row)
+                rows[entry.key, sky_index] = row
                 log(f"  {entry.key} / {sky.name}: refused ({error})")
                 continue
             row.update(precompute_s=float(method.precompute_seconds), **_summary(found))
             srgb = spectral_to_linear_srgb(np.nan_to_num(found["radiance"]), scene.wavelengths_nm).astype(np.float32)
             save_cached(cached, row, srgb)
-            rows.append(row)
+            rows[entry.key, sky_index] = row
             sky_rms = row["statistics"].get("sky", {}).get("luminance_rms", float("nan"))
             log(f"  {entry.key} / {sky.name}: sky luminance RMS {100 * sky_rms:.2f}%")
-    return rows
+    return [rows[entry.key, i] for entry in entries for i in range(len(skies))]
 
 
 def frame_seconds(row: dict, directions: int = FRAME_DIRECTIONS, frames: int = 1) -> float:
