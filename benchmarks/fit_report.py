@@ -186,6 +186,13 @@ def timing_table(metadata, speeds) -> list[str]:
     return lines
 
 
+def _joint_text(setting) -> str:
+    """The fit's joint-refinement setting: one flag, or one per kind."""
+    if isinstance(setting, dict):
+        return ", ".join(f"{kind} {'on' if on else 'off'}" for kind, on in setting.items())
+    return "on" if setting else "off"
+
+
 def write_markdown(path, dataset, coefficients, training_sets, results, metadata, speeds, figures, load):
     any_set = next(iter(training_sets.values()))
     models = list(MODELS)
@@ -200,7 +207,7 @@ def write_markdown(path, dataset, coefficients, training_sets, results, metadata
              f"{', '.join(f'{e:.2f}' for e in np.unique(elevation_deg(any_set)))} deg; "
              f"{len(any_set.directions)} view directions at or above the horizon) and the tables in "
              f"`{shown(coefficients)}` (written {ours.get('created', '?')} by skyref "
-             f"{ours.get('skyref_version', '?')}, joint refinement {'on' if ours.get('joint_refinement') else 'off'}).",
+             f"{ours.get('skyref_version', '?')}, joint refinement {_joint_text(ours.get('joint_refinement'))}).",
              "",
              "Models: **ours** = skyref's Hosek–Wilkie fit (`hosek.npz`); **published** = Hosek & Wilkie's "
              "coefficients (reference implementation 1.4a), evaluated at each sky's turbidity, ground albedo and "
