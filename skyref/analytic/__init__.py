@@ -15,27 +15,17 @@ against skyref's ground truth.
 
 from __future__ import annotations
 
-import importlib
+from skyref.sky_method import Registry
 
-from skyref.atmosphere.validation import check_choice
-
+#: Every analytic sky model by name.
+REGISTRY = Registry("model", {"preetham1999": ("skyref.analytic.preetham", "Preetham1999"),
+                              "hoffman_preetham2002": ("skyref.analytic.hoffman_preetham", "HoffmanPreetham2002"),
+                              "nielsen2003": ("skyref.analytic.nielsen", "Nielsen2003"),
+                              "nishita1993": ("skyref.analytic.nishita93", "Nishita1993"),
+                              "oneil2005": ("skyref.analytic.oneil", "ONeil2005"),
+                              "hosek2012": ("skyref.analytic.hosek_sky", "HosekWilkie2012")})
 #: name -> (module, class) of every analytic sky model.
-MODELS = {"preetham1999": ("skyref.analytic.preetham", "Preetham1999"),
-          "hoffman_preetham2002": ("skyref.analytic.hoffman_preetham", "HoffmanPreetham2002"),
-          "nielsen2003": ("skyref.analytic.nielsen", "Nielsen2003"),
-          "nishita1993": ("skyref.analytic.nishita93", "Nishita1993"),
-          "oneil2005": ("skyref.analytic.oneil", "ONeil2005"),
-          "hosek2012": ("skyref.analytic.hosek_sky", "HosekWilkie2012")}
-
-
-def model_class(name: str):
-    module, cls = MODELS[check_choice("model", name, tuple(MODELS))]
-    return getattr(importlib.import_module(module), cls)
-
-
-def analytic_model(name: str, atmosphere, wavelengths_nm="rgb", **options):
-    """The analytic model ``name`` (one of :data:`MODELS`) for ``atmosphere``, not yet
-    precomputed; ``options`` are the model's own and are kept in its ``options`` attribute."""
-    model = model_class(name)(atmosphere, wavelengths_nm, **options)
-    model.options = {**model.options, **options}
-    return model
+MODELS = REGISTRY.entries
+model_class = REGISTRY.cls
+#: ``analytic_model(name, atmosphere, wavelengths_nm="rgb", **options)``: the model, not yet precomputed.
+analytic_model = REGISTRY.build

@@ -19,15 +19,14 @@ phase functions are evaluated at ``nu``.
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from skyref.atmosphere.profiles import DensityProfile, ExponentialProfile
 from skyref.atmosphere.spectra import solar_irradiance, wavelength_grid
-from skyref.atmosphere.validation import check_view
 from skyref.errors import ParameterError
+from skyref.sky_method import SkyMethod
 
 
 # --- the atmosphere as the models see it -------------------------------------------------------
@@ -192,7 +191,7 @@ def one_minus_exp_over(x):
 
 # --- the interface -----------------------------------------------------------------------------
 
-class AnalyticModel:
+class AnalyticModel(SkyMethod):
     """Base class: subclasses set :attr:`name`, may override ``_precompute()`` and
     ``_check_validity(altitude_m, mu_s)``, and implement ``_radiance(r, mu, mu_s, nu)``
     (observer radius r in m and sun cosine mu_s, both scalars; view cosines mu and nu, arrays of
@@ -209,15 +208,6 @@ class AnalyticModel:
         self.top_radius = float(atmosphere.top_radius_m)
         #: The model's own settings, for reports.
         self.options: dict = {}
-        self.precompute_seconds: float | None = None
-
-    def precompute(self) -> float:
-        """Build the model's tables; returns (and stores in :attr:`precompute_seconds`) the wall
-        time, s."""
-        start = time.perf_counter()
-        self._precompute()
-        self.precompute_seconds = time.perf_counter() - start
-        return self.precompute_seconds
 
     def _precompute(self):
         """Nothing to tabulate by default."""
@@ -229,9 +219,7 @@ class AnalyticModel:
         """Radiance seen from ``observer_altitude_m`` (m) along unit ``directions`` (M, 3),
         east-north-up, with the sun towards ``sun_direction`` (3,): (M, N) W m^-2 sr^-1 nm^-1,
         solar disk excluded."""
-        if self.precompute_seconds is None:
-            raise RuntimeError(f"{self.name}: call precompute() before radiance()")
-        dirs, sun, altitude = check_view(directions, sun_direction, observer_altitude_m)
+        dirs, sun, altitude = self._checked_view(directions, sun_direction, observer_altitude_m)
         self._check_validity(altitude, float(sun[2]))
         mu = np.clip(dirs[:, 2], -1.0, 1.0)
         nu = np.clip(dirs @ sun, -1.0, 1.0)

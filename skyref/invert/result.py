@@ -162,12 +162,13 @@ class InversionResult:
         ``directory``; returns their paths."""
         from skyref.io.atomic import atomic_write
         from skyref.io.exr import write_sky_exr
+        from skyref.io.json_numpy import numpy_default
 
         os.makedirs(directory, exist_ok=True)
         paths = {name: os.path.join(directory, name) for name in
                  ("result.json", "convergence.png", "residuals.png", "fitted.exr", "residual.exr")}
         with atomic_write(paths["result.json"]) as f:
-            json.dump(self.to_dict(), f, indent=1, default=_json_default)
+            json.dump(self.to_dict(), f, indent=1, default=numpy_default)
         self.plot_convergence(paths["convergence.png"])
         self.plot_residuals(paths["residuals.png"])
         write_sky_exr(self.fitted_sky, paths["fitted.exr"])
@@ -263,10 +264,3 @@ class InversionResult:
             fig.savefig(tmp, dpi=110, format="png")
         plt.close(fig)
 
-
-def _json_default(value):
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    raise TypeError(f"{type(value).__name__} is not JSON-serialisable")

@@ -31,6 +31,7 @@ import numpy as np
 
 from skyref.errors import ParameterError
 from skyref.io.atomic import atomic_path
+from skyref.io.json_numpy import numpy_default
 from skyref.sky import ORDER_NAMES, Sky
 
 SPECTRAL_LAYOUT_VERSION = "1.0"
@@ -56,14 +57,6 @@ def channel_name(wavelength_nm: float, layer: str = "") -> str:
 def _channel_wavelength_nm(match) -> float:
     value = float(match["number"].replace(",", ".")) * _PREFIX[match["prefix"] or ""]
     return value * 1e9 if match["unit"] == "m" else _SPEED_OF_LIGHT / value * 1e9
-
-
-def _json_default(value):
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    raise TypeError(f"sky.metadata: {type(value).__name__} is not JSON-serialisable")
 
 
 def _check_layer(name: str, array, shape) -> np.ndarray:
@@ -107,7 +100,7 @@ def write_sky_exr(sky: Sky, path) -> None:
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage,
               "spectralLayoutVersion": SPECTRAL_LAYOUT_VERSION, "emissiveUnits": EMISSIVE_UNITS,
               "skyref.radianceUnits": RADIANCE_UNITS,
-              "skyref.metadata": json.dumps(sky.metadata, default=_json_default, sort_keys=True)}
+              "skyref.metadata": json.dumps(sky.metadata, default=numpy_default, sort_keys=True)}
     if sky.scene is not None:
         header["skyref.scene"] = tomli_w.dumps(sky.scene.to_dict())
     with atomic_path(path) as tmp, OpenEXR.File(header, channels) as exr:

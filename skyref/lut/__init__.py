@@ -12,25 +12,14 @@ transmittance table, also Hillaire's).
 
 from __future__ import annotations
 
-import importlib
+from skyref.sky_method import Registry
 
-from skyref.atmosphere.validation import check_choice
-
+#: Every LUT method by name.
+REGISTRY = Registry("method", {"bruneton2017": ("skyref.lut.bruneton", "Bruneton2017"),
+                               "elek2009": ("skyref.lut.elek", "Elek2009"),
+                               "hillaire2020": ("skyref.lut.hillaire", "Hillaire2020")})
 #: name -> (module, class) of every LUT method.
-METHODS = {"bruneton2017": ("skyref.lut.bruneton", "Bruneton2017"),
-           "elek2009": ("skyref.lut.elek", "Elek2009"),
-           "hillaire2020": ("skyref.lut.hillaire", "Hillaire2020")}
-
-
-def method_class(name: str):
-    module, cls = METHODS[check_choice("method", name, tuple(METHODS))]
-    return getattr(importlib.import_module(module), cls)
-
-
-def lut_method(name: str, atmosphere, wavelengths_nm="rgb", **options):
-    """The LUT method ``name`` (one of :data:`METHODS`) for ``atmosphere``, not yet precomputed;
-    ``options`` are the method's own (resolutions, orders, precision, ...) and are kept in its
-    ``options`` attribute for reports."""
-    method = method_class(name)(atmosphere, wavelengths_nm, **options)
-    method.options = dict(options)
-    return method
+METHODS = REGISTRY.entries
+method_class = REGISTRY.cls
+#: ``lut_method(name, atmosphere, wavelengths_nm="rgb", **options)``: the method, not yet precomputed.
+lut_method = REGISTRY.build

@@ -21,10 +21,11 @@ import drjit as dr
 import numpy as np
 
 from skyref.atmosphere.spectra import solar_irradiance, wavelength_grid
-from skyref.atmosphere.validation import check_choice, check_number, check_view
+from skyref.atmosphere.validation import check_choice, check_number
 from skyref.errors import ParameterError
 from skyref.lut.table import PRECISIONS
 from skyref.scene import SUN_ANGULAR_RADIUS_DEG
+from skyref.sky_method import SkyMethod
 
 
 def load_lut_backend(variant: str | None = None):
@@ -111,7 +112,7 @@ class LutOptics:
         return mi.Float64(dr.gather(mi.Float, albedo, index))
 
 
-class LutMethod:
+class LutMethod(SkyMethod):
     """Base class: subclasses set :attr:`name`, implement ``_precompute()`` and
     ``_radiance(r, mu, mu_s, nu)`` (view at radius r, m; cosines of view and sun zenith and of
     the view–sun angle; returns a list of one Float64 array per wavelength)."""
@@ -130,20 +131,11 @@ class LutMethod:
         self.wavelengths_nm = self.optics.wavelengths_nm
         self.channels = len(self.wavelengths_nm)
         self.solar_irradiance = solar_irradiance(self.wavelengths_nm)
-        self.precompute_seconds = None
 
     # --- precomputation -------------------------------------------------------------------
 
-    def precompute(self) -> float:
-        """Compute the tables; returns (and stores in :attr:`precompute_seconds`) the wall time, s."""
-        start = time.perf_counter()
-        self._precompute()
+    def _finish(self):
         dr.sync_thread()
-        self.precompute_seconds = time.perf_counter() - start
-        return self.precompute_seconds
-
-    def _precompute(self):
-        raise NotImplementedError
 
     def tables(self) -> dict:
         """name -> NumPy array of every precomputed table (as stored)."""
@@ -173,9 +165,7 @@ class LutMethod:
         solar disk excluded."""
         import mitsuba as mi
 
-        if self.precompute_seconds is None:
-            raise RuntimeError(f"{self.name}: call precompute() before radiance()")
-        dirs, sun, altitude = check_view(directions, sun_direction, observer_altitude_m)
+        dirs, sun, altitude = self._checked_view(directions, sun_direction, observer_altitude_m)
         r = self.optics.bottom_radius + altitude
         mu = mi.Float64(dirs[:, 2])
         mu_s = mi.Float64(np.full(len(dirs), sun[2]))

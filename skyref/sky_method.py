@@ -1,0 +1,69 @@
+"""What the audit's sky methods share, analytic models (:mod:`skyref.analytic`) and LUT methods
+(:mod:`skyref.lut`) alike: a registry of them by name, timed precomputation, and the check every
+lookup starts with.
+
+A sky method is built from an :class:`~skyref.atmosphere.Atmosphere` and a wavelength grid,
+:meth:`SkyMethod.precompute` builds its tables (timed), and ``radiance(directions,
+sun_direction, observer_altitude_m)`` returns W m^-2 sr^-1 nm^-1 along unit view directions
+in the observer's east-north-up frame, without the solar disk.
+"""
+
+from __future__ import annotations
+
+import importlib
+import time
+
+from skyref.atmosphere.validation import check_choice, check_view
+
+
+class Registry:
+    """Sky methods by name: ``entries`` maps name -> (module, class name); classes are imported
+    only when asked for. ``parameter`` names the choice in errors ("method", "model")."""
+
+    def __init__(self, parameter: str, entries: dict):
+        self.parameter = parameter
+        self.entries = entries
+
+    def cls(self, name: str):
+        """The class registered as ``name`` (a ParameterError listing the names otherwise)."""
+        module, cls = self.entries[check_choice(self.parameter, name, tuple(self.entries))]
+        return getattr(importlib.import_module(module), cls)
+
+    def build(self, name: str, atmosphere, wavelengths_nm="rgb", **options):
+        """The method ``name`` for ``atmosphere``, not yet precomputed; ``options`` are its own
+        (resolutions, orders, precision, ...) and are added to its ``options`` attribute, beside
+        the settings it records itself, for reports."""
+        method = self.cls(name)(atmosphere, wavelengths_nm, **options)
+        method.options = {**getattr(method, "options", {}), **options}
+        return method
+
+
+class SkyMethod:
+    """Base class: subclasses set :attr:`name` and implement ``_precompute()``; their
+    ``radiance`` starts with :meth:`_checked_view`."""
+
+    name = ""
+    #: Wall time of the last :meth:`precompute`, s (None: not precomputed yet).
+    precompute_seconds: float | None = None
+
+    def precompute(self) -> float:
+        """Build the method's tables; returns (and stores in :attr:`precompute_seconds`) the
+        wall time, s, including the wait for work queued on the device (:meth:`_finish`)."""
+        start = time.perf_counter()
+        self._precompute()
+        self._finish()
+        self.precompute_seconds = time.perf_counter() - start
+        return self.precompute_seconds
+
+    def _precompute(self):
+        raise NotImplementedError
+
+    def _finish(self):
+        """Wait for asynchronous work (Dr.Jit kernels); nothing for NumPy methods."""
+
+    def _checked_view(self, directions, sun_direction, observer_altitude_m: float) -> tuple:
+        """(directions (M, 3), sun (3,), altitude m) validated by
+        :func:`~skyref.atmosphere.validation.check_view`, once the tables exist."""
+        if self.precompute_seconds is None:
+            raise RuntimeError(f"{self.name}: call precompute() before radiance()")
+        return check_view(directions, sun_direction, observer_altitude_m)
