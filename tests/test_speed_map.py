@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from skyref.audit.advise import advice_lines, parse_tolerance, rank, scene_kind
-from skyref.audit.speed_map import Entry, MapSky, entry_summary, evaluate_map, frame_seconds
+from skyref.audit.speed_map import Entry, MapSky, cache_path, entry_summary, evaluate_map, frame_seconds
 from skyref.errors import ParameterError
 from skyref.scene import Observer, Sun, load_scene
 
@@ -126,6 +126,17 @@ def test_advise_cli(tmp_path, capsys):
 
 
 # --- the map measures what it claims ------------------------------------------------------------
+
+def test_a_refitted_table_is_not_served_from_the_cache(tmp_path):
+    table = tmp_path / "hosek.npz"
+    entry = Entry("hosek2012", "analytic", "skyref fit", {"table": str(table)})
+    sky = MapSky("clear, sun 30°", "clear", 0, 0.0, 30.0)
+    table.write_bytes(b"first fit")
+    first = cache_path(str(tmp_path), entry, sky)
+    assert cache_path(str(tmp_path), entry, sky) == first
+    table.write_bytes(b"second fit")
+    assert cache_path(str(tmp_path), entry, sky) != first
+
 
 def test_path_tracer_error_is_its_own_noise(tmp_path, mi, monkeypatch):
     """The map's error of the path tracer at 16 spp against a 256-spp truth is the path tracer's

@@ -202,7 +202,14 @@ def _summary(found: dict) -> dict:
 
 
 def cache_path(cache_dir: str, entry: Entry, sky: MapSky) -> str:
-    safe = "".join(ch if ch.isalnum() else "_" for ch in f"{entry.key}__{sky.name}")
+    """The cached row of ``entry`` on ``sky``; an entry that reads a coefficient table is keyed
+    by the table's content too, so a refitted table is measured again."""
+    from skyref.batch.store import sha256_of
+
+    tag = f"{entry.key}__{sky.name}"
+    if "table" in entry.options:
+        tag += "__" + sha256_of(entry.options["table"])[:12]
+    safe = "".join(ch if ch.isalnum() else "_" for ch in tag)
     return os.path.join(cache_dir, f"{safe}.npz")
 
 
