@@ -40,10 +40,11 @@ import numpy as np
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
 from skyref.analytic.hosek import CHANNELS, published_table  # noqa: E402
-from skyref.audit.metrics import NOISE_RATIO  # noqa: E402
+from skyref.audit.metrics import NOISE_RATIO, _statistics  # noqa: E402
 from skyref.color import default_exposure, tonemap_srgb8  # noqa: E402
 from skyref.fit.cli import FORM_NAMES, noise_line  # noqa: E402
-from skyref.fit.evaluate import error_summary, model_radiance, relative_errors, throughput  # noqa: E402
+from skyref.fit.evaluate import (error_summary, interpolation_gap, model_radiance, relative_errors,  # noqa: E402
+                                 throughput)
 from skyref.fit.export import read_tables  # noqa: E402
 from skyref.fit.training import load_batch_dataset  # noqa: E402
 from skyref.io.atomic import atomic_path, atomic_write  # noqa: E402
@@ -60,6 +61,14 @@ MODELS = {"ours": "hosek.npz", "published": None, "Perez": "perez.npz"}
 IMAGE_TURBIDITIES = (2.0, 6.0)
 IMAGE_ELEVATIONS_DEG = (3.0, 12.0, 38.0)
 IMAGE_ALBEDO = 0.0
+#: Regions of the sky reported apart (zenith angle theta and view-sun angle gamma, degrees): the
+#: form's horizon term and its aureole terms are tested where each dominates.
+HORIZON_ZENITH_DEG = 85.0
+AUREOLE_GAMMA_DEG = 15.0
+REGIONS = {"horizon, near the sun": "theta >= 85°, gamma < 15°",
+           "horizon, away from the sun": "theta >= 85°, gamma >= 15°",
+           "aureole above the horizon": "theta < 85°, gamma < 15°",
+           "rest of the sky": "theta < 85°, gamma >= 15°"}
 
 
 def shown(path) -> str:
@@ -117,6 +126,29 @@ def grouped_statistics(table, training, keys) -> dict:
             for key in sorted(set(keys))}
 
 
+def region_masks(training) -> dict:
+    """{region: (S, P) mask} of :data:`REGIONS`."""
+    horizon = np.degrees(np.arccos(np.clip(training.cos_theta, -1.0, 1.0)))[None, :] >= HORIZON_ZENITH_DEG
+    aureole = np.degrees(training.gamma) < AUREOLE_GAMMA_DEG
+    return dict(zip(REGIONS, (horizon & aureole, horizon & ~aureole, ~horizon & aureole, ~horizon & ~aureole)))
+
+
+def region_statistics(table, training) -> dict:
+    """{region: statistics} over every channel of the kind pooled, plus "median" |error| and
+    "share" (of the fitted directions' solid angle)."""
+    error, noise = relative_errors(table, training)
+    weights = training.weights()
+    found = {}
+    for region, mask in region_masks(training).items():
+        e, n = error[mask], noise[mask]
+        stats = _statistics(e.ravel(), n.ravel())
+        if stats is not None:
+            stats["median"] = float(np.nanmedian(np.abs(e)))
+            stats["share"] = float(weights[mask].sum() / weights.sum())
+        found[region] = stats
+    return found
+
+
 def evaluate_models(tables, training_sets):
     """Per kind and model: statistics over all skies ("all"), per sky ("skies"), by solar
     elevation, by turbidity and by (elevation, turbidity) cell."""
@@ -133,7 +165,8 @@ def evaluate_models(tables, training_sets):
                 "all": summary["channels"], "skies": summary["skies"],
                 "elevation": grouped_statistics(table, training, list(elevations)),
                 "turbidity": grouped_statistics(table, training, list(turbidities)),
-                "cells": grouped_statistics(table, training, list(zip(elevations, turbidities)))}
+                "cells": grouped_statistics(table, training, list(zip(elevations, turbidities))),
+                "regions": region_statistics(table, training)}
     return results
 
 
@@ -193,7 +226,7 @@ def _joint_text(setting) -> str:
     return "on" if setting else "off"
 
 
-def write_markdown(path, dataset, coefficients, training_sets, results, metadata, speeds, figures, load):
+def write_markdown(path, dataset, coefficients, training_sets, results, metadata, speeds, gaps, figures, load):
     any_set = next(iter(training_sets.values()))
     models = list(MODELS)
     ours = metadata["ours"]
@@ -226,13 +259,40 @@ def write_markdown(path, dataset, coefficients, training_sets, results, metadata
              f"(`skyref.fit.evaluate.throughput`: NumPy float64; JAX jit-compiled float32 on "
              f"{', '.join(sorted({s['jax_device'] for by_kind in speeds.values() for s in by_kind.values()}))}). "
              "The published table has the form "
-             "and evaluator of ours, hence its speed.", ""]
+             "and evaluator of ours, hence its speed.", "",
+             "## Between the stored configurations", "",
+             "Engines (and the published code) evaluate a sky between the stored turbidities and albedos by "
+             "blending the coefficients of its neighbours. The ground truth exists only at the stored "
+             "configurations, so this checks the table itself: the sky halfway between two neighbours, as the "
+             "model evaluates it, against the mean of the two neighbours' radiances "
+             "(`skyref.fit.evaluate.interpolation_gap`; every channel, solar elevations 3, 10, 30 and 60 deg, "
+             "directions above the horizon). Radiance is not exactly linear in albedo (light reflected by the "
+             "ground returns after scattering), so a gap of a few % at albedo 1/2 is physical; a large one means "
+             "neighbouring configurations trade their coefficients against each other differently, and every "
+             "sky off the grid inherits the error.", "",
+             "| model | kind | turbidity t + 1/2: median | p95 | albedo 1/2: median | p95 |",
+             "|---|---|---:|---:|---:|---:|",
+             *(f"| {model} | {kind} | {100 * g['turbidity']['median']:.2f}% | {100 * g['turbidity']['p95']:.1f}% | "
+               f"{100 * g['albedo']['median']:.2f}% | {100 * g['albedo']['p95']:.1f}% |"
+               for model, by_kind in gaps.items() for kind, g in by_kind.items()), ""]
     for kind, training in training_sets.items():
         by_model = results[kind]
         present = [m for m in models if m in by_model]
         lines += [f"## {kind}: errors over all skies", "", noise_line(training) + ".", "",
                   *error_table("channel", [(channel_label(kind, c), {m: by_model[m]["all"][c] for m in present})
                                            for c in training.channels], present), ""]
+        lines += [f"By region of the sky (every channel pooled; theta: zenith angle, gamma: angle from the sun; "
+                  "share: of the fitted directions' solid angle). RMS (noise-corrected) and median |error|:", "",
+                  "| region | share | " + " | ".join(f"{m} RMS | {m} median" for m in present) + " |",
+                  "|---|---:|" + "---:|---:|" * len(present)]
+        for region, definition in REGIONS.items():
+            first = by_model[present[0]]["regions"][region]
+            if first is None:
+                continue
+            lines.append(f"| {region} ({definition}) | {100 * first['share']:.1f}% | " + " | ".join(
+                f"{rms_cell(by_model[m]['regions'][region])} | {100 * by_model[m]['regions'][region]['median']:.2f}"
+                for m in present) + " |")
+        lines.append("")
         if kind in figures.get("rms", {}):
             lines += [f"RMS error by solar elevation and turbidity (both albedos pooled); `x`: not resolved (the "
                       f"noise on the RMS exceeds 1/{NOISE_RATIO:g} of it).", "",
@@ -443,6 +503,9 @@ def main():
 
     log("errors against the ground truth")
     results = evaluate_models(tables, training_sets)
+    log("between stored configurations")
+    gaps = {model: {kind: interpolation_gap(table) for kind, table in by_kind.items() if kind in training_sets}
+            for model, by_kind in tables.items()}
     log("evaluation throughput")
     speeds = {model: {kind: throughput(tables[model][kind]) for kind in meta.get("fits", {})}
               for model, meta in metadata.items()}
@@ -460,7 +523,8 @@ def main():
             figures["skies"][value] = f"fit_report/sky_T{value:g}.png"
     write_csv(os.path.join(directory, "errors.csv"), results)
     report = os.path.join(args.results, "fit_report.md")
-    write_markdown(report, args.dataset, args.coefficients, training_sets, results, metadata, speeds, figures, load)
+    write_markdown(report, args.dataset, args.coefficients, training_sets, results, metadata, speeds, gaps, figures,
+                   load)
     log(f"wrote {report} and {directory}/ in {time.perf_counter() - begin:.0f} s")
 
 

@@ -12,7 +12,9 @@ import os
 
 import numpy as np
 
+from skyref.atmosphere.validation import check_number
 from skyref.errors import ParameterError
+from skyref.fit.fitter import PRIOR_WEIGHT
 
 KINDS = ("spectral", "xyz", "rgb")
 FORM_NAMES = {"hosek": "Hosek-Wilkie", "perez": "Perez (Preetham-style baseline)"}
@@ -30,6 +32,9 @@ def add_fit_parser(subparsers):
                    "dataset supports): spectral, xyz, rgb")
     p.add_argument("--no-perez", action="store_true", help="skip the Perez (Preetham-style) baseline fit")
     p.add_argument("--no-joint", action="store_true", help="skip the joint refinement of the Bezier control points")
+    p.add_argument("--joint-prior-weight", type=float, default=PRIOR_WEIGHT, metavar="W",
+                   help="the joint refinement's pull towards the start table, per coefficient and sky (default "
+                        "%(default)g; 0: the data alone, whose neighbouring configurations then may not blend)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
     p.set_defaults(run=cmd_fit)
     return p
@@ -133,7 +138,8 @@ def _fit(args, training_sets) -> int:
             training = training_sets[kind]
             if form == "hosek":
                 print(noise_line(training))
-            result = fit_table(training, form=form, joint=not args.no_joint, progress=progress)
+            result = fit_table(training, form=form, joint=not args.no_joint, joint_prior_weight=args.joint_prior_weight,
+                               progress=progress)
             tables[kind] = result.table
             unfitted = [f"{channel}" for channel, done in zip(result.table.channels, result.fitted.any(axis=(1, 2)))
                         if not done]
@@ -147,7 +153,7 @@ def _fit(args, training_sets) -> int:
                   f"unconverged problems: {result.unconverged}")
             print("\n".join(_summary_lines(f"{FORM_NAMES[form]} fit", result.table, training)))
         metadata = {"source": f"skyref fit of {os.path.abspath(args.grid)}", "training": args.grid,
-                    "joint_refinement": not args.no_joint, "fits": runs}
+                    "joint_refinement": not args.no_joint, "joint_prior_weight": args.joint_prior_weight, "fits": runs}
         written += write_tables(tables, args.out, form, metadata=metadata, notes=notes)
     print("wrote " + ", ".join(written))
     return 0
@@ -159,6 +165,7 @@ def cmd_fit(args) -> int:
 
     if args.evaluate and args.out:
         raise ParameterError("--out", args.out, "only when fitting (without --evaluate)", "conflicting options")
+    check_number("--joint-prior-weight", args.joint_prior_weight, 0.0, 1e6)
     training_sets = load_batch_dataset(args.grid)
     if args.evaluate:
         return _evaluate(args, training_sets)

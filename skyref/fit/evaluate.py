@@ -6,6 +6,9 @@ error / truth. Statistics are those of the LUT audits (:func:`skyref.audit.metri
 signed mean, noise-corrected RMS, 95th percentile and maximum of |error|, each with the noise's
 value) over the directions the fit uses (above the horizon, off the solar disk, truth > 0), per
 channel and per sky configuration (solar elevation, turbidity, albedo).
+
+Also: :func:`interpolation_gap`, how a table behaves between the configurations it stores (where
+no ground truth was fitted), and :func:`throughput`, its evaluation speed.
 """
 
 from __future__ import annotations
@@ -76,3 +79,34 @@ def throughput(table, directions: int = 1 << 20, repeats: int = 3) -> dict:
     return {"numpy": best(lambda: table.radiance(theta, gamma, *configuration)),
             "jax": best(lambda: evaluate(theta_j, gamma_j).block_until_ready()),
             "channels": len(table.channels), "jax_device": str(jax.devices()[0])}
+
+
+def interpolation_gap(table, elevations_deg=(3.0, 10.0, 30.0, 60.0), steps: int = 24) -> dict:
+    """How smoothly ``table`` passes between its stored configurations: the sky halfway between two
+    stored turbidities (t + 1/2, each albedo) or at albedo 1/2 (each turbidity), as the model
+    evaluates it (by blending coefficients, like the published code), against the mean of the two
+    stored skies' radiances. A table whose neighbouring configurations agree on their coefficients
+    blends them into a sky between the two (gap ~0); one whose coefficients trade against each other
+    differently at each configuration does not, and every sky off the grid inherits that error.
+
+    Returns {"turbidity": stats, "albedo": stats} with "median" and "p95" of |gap| over a grid of
+    directions above the horizon (``steps`` x 2 ``steps``), ``elevations_deg`` and every channel
+    (directions where both neighbours have zero radiance are left out)."""
+    from skyref.analytic.hosek import ALBEDOS, TURBIDITIES
+
+    theta, gamma = np.meshgrid(np.radians(np.linspace(0.0, 89.0, steps)), np.radians(np.linspace(2.0, 178.0, 2 * steps)))
+    pairs = {"turbidity": [((low, a), (high, a)) for a in ALBEDOS for low, high in zip(TURBIDITIES[:-1], TURBIDITIES[1:])],
+             "albedo": [((t, ALBEDOS[0]), (t, ALBEDOS[1])) for t in TURBIDITIES]}
+    found = {}
+    for axis, neighbours in pairs.items():
+        gaps = []
+        for elevation in np.radians(elevations_deg):
+            for first, second in neighbours:
+                sky = [table.radiance(theta, gamma, elevation, *configuration) for configuration in (first, second)]
+                halfway = table.radiance(theta, gamma, elevation, *(0.5 * (np.array(first) + np.array(second))))
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    gaps.append(np.abs(halfway / (0.5 * (sky[0] + sky[1])) - 1.0).ravel())
+        gaps = np.concatenate(gaps)
+        gaps = gaps[np.isfinite(gaps)]
+        found[axis] = {"median": float(np.median(gaps)), "p95": float(np.percentile(gaps, 95.0))}
+    return found

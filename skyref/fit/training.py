@@ -201,9 +201,11 @@ def load_batch_dataset(path) -> dict[str, TrainingSet]:
     if wavelengths.min() <= TRISTIMULUS_SPAN_NM[0] and wavelengths.max() >= TRISTIMULUS_SPAN_NM[1]:
         for kind in ("xyz", "rgb"):
             matrix = _tristimulus_matrix(wavelengths, kind)
-            # All wavelengths of a path share its random numbers, so their errors are correlated:
-            # the errors through |M| bound the error of the weighted sum.
-            sets[kind] = training_set(kind, CHANNELS[kind], radiance @ matrix, error @ np.abs(matrix))
+            # All wavelengths of a path share its random numbers, so their errors are almost
+            # perfectly correlated: the error of the weighted sum is then |sum of M x error|.
+            # Summing |M| x error instead would assume errors of opposite sign never cancel and,
+            # for sRGB red (X minus Y and Z), overstate its noise several times.
+            sets[kind] = training_set(kind, CHANNELS[kind], radiance @ matrix, np.abs(error @ matrix))
     if not sets:
         raise ParameterError("wavelengths", list(wavelengths), f"band centres {BAND_CENTRES_NM} nm or a span "
                              f"of {TRISTIMULUS_SPAN_NM} nm", "no channel of the model")
