@@ -65,10 +65,10 @@ IMAGE_ALBEDO = 0.0
 #: form's horizon term and its aureole terms are tested where each dominates.
 HORIZON_ZENITH_DEG = 85.0
 AUREOLE_GAMMA_DEG = 15.0
-REGIONS = {"horizon, near the sun": "theta >= 85°, gamma < 15°",
-           "horizon, away from the sun": "theta >= 85°, gamma >= 15°",
-           "aureole above the horizon": "theta < 85°, gamma < 15°",
-           "rest of the sky": "theta < 85°, gamma >= 15°"}
+REGIONS = {"horizon, near the sun": f"theta >= {HORIZON_ZENITH_DEG:g}°, gamma < {AUREOLE_GAMMA_DEG:g}°",
+           "horizon, away from the sun": f"theta >= {HORIZON_ZENITH_DEG:g}°, gamma >= {AUREOLE_GAMMA_DEG:g}°",
+           "aureole above the horizon": f"theta < {HORIZON_ZENITH_DEG:g}°, gamma < {AUREOLE_GAMMA_DEG:g}°",
+           "rest of the sky": f"theta < {HORIZON_ZENITH_DEG:g}°, gamma >= {AUREOLE_GAMMA_DEG:g}°"}
 
 
 def shown(path) -> str:
@@ -219,13 +219,6 @@ def timing_table(metadata, speeds) -> list[str]:
     return lines
 
 
-def _joint_text(setting) -> str:
-    """The fit's joint-refinement setting: one flag, or one per kind."""
-    if isinstance(setting, dict):
-        return ", ".join(f"{kind} {'on' if on else 'off'}" for kind, on in setting.items())
-    return "on" if setting else "off"
-
-
 def write_markdown(path, dataset, coefficients, training_sets, results, metadata, speeds, gaps, figures, load):
     any_set = next(iter(training_sets.values()))
     models = list(MODELS)
@@ -240,7 +233,7 @@ def write_markdown(path, dataset, coefficients, training_sets, results, metadata
              f"{', '.join(f'{e:.2f}' for e in np.unique(elevation_deg(any_set)))} deg; "
              f"{len(any_set.directions)} view directions at or above the horizon) and the tables in "
              f"`{shown(coefficients)}` (written {ours.get('created', '?')} by skyref "
-             f"{ours.get('skyref_version', '?')}, joint refinement {_joint_text(ours.get('joint_refinement'))}).",
+             f"{ours.get('skyref_version', '?')}, joint refinement {'on' if ours.get('joint_refinement') else 'off'}).",
              "",
              "Models: **ours** = skyref's Hosek–Wilkie fit (`hosek.npz`); **published** = Hosek & Wilkie's "
              "coefficients (reference implementation 1.4a), evaluated at each sky's turbidity, ground albedo and "
