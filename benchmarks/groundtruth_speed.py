@@ -1,26 +1,32 @@
-"""Time to 1% relative RMS error: the ``atmosphere`` integrator against stock ``volpath`` +
-skyref's ``atmosphere_medium``, on the same spherical sky, in one run.
+"""Time to 1% relative RMS error of the ground truth, per estimator, measured in one run.
 
-Scene: preset ``bruneton2017``, sun zenith 60 deg, observer 1 m above the ground (stock
-Mitsuba's float32 ground sphere needs the clearance), 128x64 equirectangular image. Both
-estimators render the RGB wavelength grid (680/550/440 nm) in ``llvm_ad_rgb``, where they
-estimate exactly the same three numbers per pixel. (In spectral variants ``volpath`` samples
-continuous wavelengths into film bands, a different estimand; the integrator's time on the full
-48-wavelength grid is reported on its own.)
+Skies (bruneton2017 unless said, observer 1 m above the ground, 128x64 equirectangular):
+clear (sun zenith 60), hazy (turbidity 6, sun 60), sunset (sun 88), twilight (sun 96).
+Wavelength grids: RGB (680/550/440 nm), 17 wavelengths (380-780 nm / 25 nm), 48 (360-830 / 10).
 
-Error: relative RMS over the sky pixels (view zenith < 88 deg, more than 3 deg from the sun:
-stock ``directional`` is a delta light without a disk, so pixels near the sun are not the same
-quantity) and over wavelengths, against a reference rendered by the integrator with many more
-samples; the reference's own variance (from its independent passes) is subtracted. Time to 1%
-extrapolates the measured error with the Monte Carlo rate err ~ 1/sqrt(time).
+Estimators: the ``atmosphere`` integrator's ``delta_tracking`` (the baseline) and
+``line_integral`` (experimental), and stock Mitsuba ``volpath`` + skyref's ``atmosphere_medium``
+(RGB only: in spectral variants volpath samples continuous wavelengths into film bands, another
+estimand). Each renders 16 independent batches; the error of a render is the relative RMS of its
+per-pixel standard errors over the sky pixels (view zenith < 88 deg, more than 3 deg from the
+sun: stock ``directional`` is a delta light without a disk) and the wavelengths. Time to 1% =
+CPU time x (error / 1%)^2 (the Monte Carlo rate); CPU time is steadier than wall time on a
+shared machine, and kernels are compiled before the timed render.
 
-Usage: ``python benchmarks/groundtruth_speed.py [--quick]``; writes results/groundtruth_speed.md.
+This measures noise, not bias. The line-integral estimator's systematic difference from the
+baseline is reported beside it (relative RMS over the same pixels, both estimators' noise
+removed): where its quadrature is not yet within its bound it shows there.
+
+Usage: ``python benchmarks/groundtruth_speed.py [--quick]``; writes
+``results/groundtruth_speed.md`` and ``results/groundtruth_speed.json``
+(``{"skies": {name: {"speedup_vs_baseline": x, ...}}}``, x for the RGB grid).
 """
 
 from __future__ import annotations
 
 import argparse
 import datetime
+import json
 import math
 import os
 import platform
@@ -37,51 +43,72 @@ mi = load_mitsuba("llvm_ad_rgb")
 
 import skyref.atmosphere as atm  # noqa: E402
 from skyref.io.atomic import atomic_write  # noqa: E402
+from skyref.io.json_numpy import numpy_default  # noqa: E402
 from skyref.plugins.volpath_scene import stock_volpath_scene  # noqa: E402
 from skyref.render import render_sky, sensor_dict  # noqa: E402
 from skyref.scene import Camera, Observer, RenderSettings, Scene, Sun  # noqa: E402
 
 TARGET = 0.01
-RESULTS = os.path.join(os.path.dirname(__file__), "..", "results", "groundtruth_speed.md")
+BATCHES = 16
+RESULTS = os.path.join(os.path.dirname(__file__), "..", "results")
+
+SKIES = {"clear": (None, 60.0), "hazy": (6.0, 60.0), "sunset": (None, 88.0), "twilight": (None, 96.0)}
+GRIDS = {"rgb": "rgb", "17 wavelengths": {"start_nm": 380.0, "stop_nm": 780.0, "step_nm": 25.0},
+         "48 wavelengths": {"start_nm": 360.0, "stop_nm": 830.0, "step_nm": 10.0}}
+#: samples per pixel and batch: (delta tracking, line integral, volpath) per grid
+SPP = {"rgb": (16, 4, 4), "17 wavelengths": (8, 2, 0), "48 wavelengths": (4, 1, 0)}
 
 
-def scene_for(wavelengths):
-    return Scene(atmosphere=atm.bruneton2017(), sun=Sun(60.0, 180.0), observer=Observer(1.0),
-                 camera=Camera(width=128, height=64), wavelengths=wavelengths,
-                 render=RenderSettings(spp=64, passes=4), name="groundtruth-speed")
+def scene_for(sky, grid):
+    turbidity, sun_zenith = SKIES[sky]
+    atmosphere = atm.bruneton2017() if turbidity is None else atm.from_turbidity(turbidity)
+    return Scene(atmosphere=atmosphere, sun=Sun(sun_zenith, 180.0), observer=Observer(1.0),
+                 camera=Camera(width=128, height=64), wavelengths=GRIDS[grid],
+                 render=RenderSettings(spp=BATCHES, passes=BATCHES), name=f"groundtruth-speed-{sky}")
 
 
-def error_mask(scene, directions):
+def sky_mask(scene, directions):
     cos_sun = directions @ scene.sun.direction
     return (directions[..., 2] > math.cos(math.radians(88.0))) & (cos_sun < math.cos(math.radians(3.0)))
 
 
-def relative_rms(image, reference, reference_se, mask):
-    """Relative RMS error over masked pixels and all wavelengths, reference variance removed."""
-    rel = (image - reference)[mask] / reference[mask]
-    rel_se = reference_se[mask] / reference[mask]
-    return math.sqrt(max(float(np.mean(rel ** 2 - rel_se ** 2)), 0.0))
+def relative_rms(standard_error, radiance, mask):
+    """Relative RMS of the standard errors over the masked, lit pixels and all wavelengths."""
+    se, value = standard_error[mask], radiance[mask]
+    lit = value > 0.0
+    return math.sqrt(float(np.mean((se[lit] / value[lit]) ** 2)))
 
 
-def time_integrator(scene, spp, reference, mask):
-    render_sky(scene, spp=4, passes=2)                      # compile the kernels first
-    sky = render_sky(scene, spp=spp, passes=4, seed=1)
-    seconds = sky.metadata["render_time_s"]
-    samples = scene.camera.width * scene.camera.height * spp
-    return seconds, samples, relative_rms(sky.radiance, reference.radiance, reference.standard_error, mask)
+def time_integrator(scene, spp, estimator, scale):
+    render_sky(scene, spp=BATCHES, passes=BATCHES, estimator=estimator)      # compile first
+    start = time.process_time()
+    sky = render_sky(scene, spp=BATCHES * spp * scale, passes=BATCHES, seed=1, estimator=estimator)
+    return time.process_time() - start, sky
 
 
-def time_volpath(scene, spp, reference, mask):
+def time_volpath(scene, spp, scale, mask):
     description = stock_volpath_scene(scene.atmosphere, scene.sun.zenith_deg, scene.sun.azimuth_deg,
                                       scene.observer.altitude_m, sensor_dict(scene.camera),
                                       max_depth=scene.render.max_depth)
     volpath = mi.load_dict(description)
-    mi.render(volpath, spp=2, seed=99)                      # compile the kernels first
-    start = time.perf_counter()
-    image = mi.render(volpath, spp=spp, seed=1).numpy()[..., :3]
-    seconds = time.perf_counter() - start
-    samples = scene.camera.width * scene.camera.height * spp
-    return seconds, samples, relative_rms(image, reference.radiance, reference.standard_error, mask)
+    mi.render(volpath, spp=2, seed=99).numpy()                   # compile first
+    start = time.process_time()
+    batches = np.stack([mi.render(volpath, spp=spp * scale, seed=1 + b).numpy()[..., :3] for b in range(BATCHES)])
+    seconds = time.process_time() - start
+    radiance = batches.mean(axis=0)
+    return seconds, relative_rms(batches.std(axis=0, ddof=1) / math.sqrt(BATCHES), radiance, mask)
+
+
+def systematic_difference(a, b, mask):
+    """Relative RMS difference of two skies over the masked pixels, their noise removed."""
+    lit = b.radiance[mask] > 0.0
+    diff = ((a.radiance - b.radiance)[mask] / b.radiance[mask])[lit]
+    noise = ((a.standard_error ** 2 + b.standard_error ** 2)[mask] / b.radiance[mask] ** 2)[lit]
+    return math.sqrt(max(float(np.mean(diff ** 2 - noise)), 0.0))
+
+
+def to_target(seconds, error):
+    return seconds * (error / TARGET) ** 2
 
 
 def main():
@@ -90,50 +117,74 @@ def main():
     args = parser.parse_args()
     scale = 1 if args.quick else 4
 
-    rgb = scene_for("rgb")
-    print("reference (integrator, many samples) ...", flush=True)
-    reference = render_sky(rgb, spp=1024 * scale, passes=8, seed=12345)
-    mask = error_mask(rgb, reference.directions)
+    rows, summary = [], {}
+    for sky in SKIES:
+        summary[sky] = {}
+        for grid in GRIDS:
+            scene = scene_for(sky, grid)
+            spp_dt, spp_li, spp_vp = SPP[grid]
+            print(f"{sky}, {grid} ...", flush=True)
+            t_dt, baseline = time_integrator(scene, spp_dt, "delta_tracking", scale)
+            mask = sky_mask(scene, baseline.directions)
+            e_dt = relative_rms(baseline.standard_error, baseline.radiance, mask)
+            t_li, line = time_integrator(scene, spp_li, "line_integral", scale)
+            e_li = relative_rms(line.standard_error, line.radiance, mask)
+            pixels = mask.size
+            entry = {"baseline_cpu_s_to_1pct": to_target(t_dt, e_dt),
+                     "line_integral_cpu_s_to_1pct": to_target(t_li, e_li),
+                     "speedup_vs_baseline": to_target(t_dt, e_dt) / to_target(t_li, e_li),
+                     "line_integral_systematic_difference": systematic_difference(line, baseline, mask),
+                     "baseline_cpu_us_per_channel_sample": 1e6 * t_dt / (pixels * BATCHES * spp_dt * scale
+                                                                         * len(scene.wavelengths_nm)),
+                     "line_integral_cpu_us_per_channel_sample": 1e6 * t_li / (pixels * BATCHES * spp_li * scale
+                                                                              * len(scene.wavelengths_nm))}
+            rows.append((sky, grid, "atmosphere, delta_tracking (baseline)", pixels * BATCHES * spp_dt * scale,
+                         t_dt, e_dt, ""))
+            rows.append((sky, grid, "atmosphere, line_integral", pixels * BATCHES * spp_li * scale, t_li, e_li,
+                         f"{100 * entry['line_integral_systematic_difference']:.2f}%"))
+            if spp_vp:
+                t_vp, e_vp = time_volpath(scene, spp_vp, scale, mask)
+                entry["volpath_cpu_s_to_1pct"] = to_target(t_vp, e_vp)
+                entry["speedup_baseline_vs_volpath"] = to_target(t_vp, e_vp) / to_target(t_dt, e_dt)
+                rows.append((sky, grid, "stock volpath + atmosphere_medium", pixels * BATCHES * spp_vp * scale,
+                             t_vp, e_vp, ""))
+            summary[sky][grid] = entry
 
-    rows = []
-    print("atmosphere integrator ...", flush=True)
-    seconds, samples, err = time_integrator(rgb, 64 * scale, reference, mask)
-    rows.append(("atmosphere integrator", "rgb (3)", samples, seconds, err))
-    print("stock volpath + atmosphere_medium ...", flush=True)
-    seconds, samples, err = time_volpath(rgb, 16 * scale, reference, mask)
-    rows.append(("stock volpath + atmosphere_medium", "rgb (3)", samples, seconds, err))
-
-    spectral = scene_for({"start_nm": 360.0, "stop_nm": 830.0, "step_nm": 10.0})
-    print("spectral reference ...", flush=True)
-    spectral_reference = render_sky(spectral, spp=256 * scale, passes=8, seed=12345)
-    seconds, samples, err = time_integrator(spectral, 16 * scale, spectral_reference,
-                                            error_mask(spectral, spectral_reference.directions))
-    rows.append(("atmosphere integrator", "360-830 nm / 10 nm (48)", samples, seconds, err))
-
-    def to_target(seconds, err):
-        return seconds * (err / TARGET) ** 2 if err > 0 else float("nan")
-
-    ratio = to_target(rows[1][3], rows[1][4]) / to_target(rows[0][3], rows[0][4])
     lines = [
-        "# Ground truth speed: time to 1% relative RMS error",
+        "# Ground truth speed: CPU time to 1% relative RMS error",
         "",
         f"Generated by `python benchmarks/groundtruth_speed.py{' --quick' if args.quick else ''}` on "
         f"{datetime.date.today().isoformat()} ({platform.machine()}, {os.cpu_count()} cores, variant llvm_ad_rgb).",
         "",
-        "Scene: bruneton2017, sun zenith 60 deg, observer 1 m, 128x64 equirectangular. Error: relative RMS",
-        "over sky pixels (view zenith < 88 deg, > 3 deg from the sun) and wavelengths, against an",
-        "integrator reference with its own variance removed; time to 1% = time x (error / 1%)^2.",
+        "128x64 equirectangular, observer 1 m; 16 independent batches per render. Error: relative RMS of the",
+        "per-pixel standard errors over sky pixels (view zenith < 88 deg, > 3 deg from the sun) and wavelengths;",
+        "time to 1% = CPU time x (error / 1%)^2. 'systematic' is the line-integral estimator's relative RMS",
+        "difference from the baseline with both noises removed (its quadrature bias where it is not yet within bound).",
         "",
-        "| estimator | wavelengths | samples | time (s) | samples/s | rel. RMS error | time to 1% (s) |",
-        "|---|---|---:|---:|---:|---:|---:|",
+        "| sky | wavelengths | estimator | samples | CPU (s) | rel. RMS error | CPU s to 1% | systematic |",
+        "|---|---|---|---:|---:|---:|---:|---:|",
     ]
-    for name, grid, samples, seconds, err in rows:
-        lines.append(f"| {name} | {grid} | {samples:,} | {seconds:.2f} | {samples / seconds:,.0f} | "
-                     f"{100 * err:.2f}% | {to_target(seconds, err):,.1f} |")
-    lines += ["", f"**Speed-up at equal error (RGB grid): {ratio:.1f}x** "
-              "(volpath's time to 1% / the integrator's, same run).", ""]
-    with atomic_write(RESULTS) as f:
+    for sky, grid, name, samples, seconds, error, systematic in rows:
+        lines.append(f"| {sky} | {grid} | {name} | {samples:,} | {seconds:.2f} | {100 * error:.2f}% | "
+                     f"{to_target(seconds, error):,.1f} | {systematic} |")
+    lines += ["", "Speed-up of the line-integral estimator over the baseline at equal error (CPU time to 1%), and",
+              "the per-channel cost of one sample (CPU µs):", "",
+              "| sky | wavelengths | speed-up vs baseline | baseline µs/channel/sample | line integral µs/channel/sample |",
+              "|---|---|---:|---:|---:|"]
+    for sky, grids in summary.items():
+        for grid, entry in grids.items():
+            lines.append(f"| {sky} | {grid} | {entry['speedup_vs_baseline']:.2f}x | "
+                         f"{entry['baseline_cpu_us_per_channel_sample']:.3f} | "
+                         f"{entry['line_integral_cpu_us_per_channel_sample']:.3f} |")
+    lines.append("")
+    os.makedirs(RESULTS, exist_ok=True)
+    with atomic_write(os.path.join(RESULTS, "groundtruth_speed.md")) as f:
         f.write("\n".join(lines))
+    report = {"generated": datetime.date.today().isoformat(), "quick": args.quick,
+              "skies": {sky: {"speedup_vs_baseline": grids["rgb"]["speedup_vs_baseline"], "grids": grids}
+                        for sky, grids in summary.items()}}
+    with atomic_write(os.path.join(RESULTS, "groundtruth_speed.json")) as f:
+        json.dump(report, f, indent=2, default=numpy_default)
     print("\n".join(lines))
 
 

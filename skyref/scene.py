@@ -180,7 +180,7 @@ class RenderSettings:
 
     spp: int = 64
     seed: int = 0
-    passes: int = 4
+    passes: int = 16
     max_depth: int = 64
     pixel_sampling: str = "area"
 

@@ -214,11 +214,11 @@ def test_render_to_error_reaches_its_target_with_honest_error_bars(mi):
     from skyref.scene import Camera, RenderSettings, Scene, Sun
 
     scene = Scene(sun=Sun(zenith_deg=40.0), camera=Camera(width=8, height=4), wavelengths="rgb",
-                  render=RenderSettings(passes=4))
+                  render=RenderSettings(passes=16))
     sky = render_to_error(scene, 0.05, seeds=list(range(11, 19)), max_spp=8192)
     assert relative_error_percentile(sky) <= 0.05
     assert sky.metadata["spp"] < 8192 and len(sky.metadata["seed"]) >= 2
-    reference = render_sky(scene, spp=4096, passes=8, seed=99)
+    reference = render_sky(scene, spp=8192, passes=16, seed=99)
     z = (sky.radiance - reference.radiance) / np.hypot(sky.standard_error, reference.standard_error)
     z = z[np.isfinite(z)]
     assert z.size == 8 * 4 * 3

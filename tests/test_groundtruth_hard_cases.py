@@ -90,6 +90,28 @@ def test_horizon_views_near_the_ground(mi, observer_m, geometry):
     assert np.all(sky > 0.0)
 
 
+@pytest.mark.parametrize("geometry", ["spherical", "plane_parallel"])
+def test_tangent_ray_from_the_ground_misses_it(mi, geometry):
+    """A view at zenith exactly 90 deg from the ground (float32 cos(pi/2) = -4.4e-8) is a
+    horizontal ray: it must see the sky along the horizon, not the ground at distance 0. Its
+    single scattering lies within 5% of the view 0.01 deg above it (a long bright path) and far
+    above the ground 0.01 deg below it (the ground at distance 0, albedo 0.1)."""
+    from skyref.render import build_integrator
+    from skyref.scene import Scene, Sun
+
+    scene = Scene(atmosphere=bruneton(), sun=Sun(60.0, 180.0), wavelengths=WL)
+    integ = build_integrator(scene, geometry=geometry)
+    # a horizontal direction as float32 trigonometry gives it (the sensors' pixel directions)
+    tangent_z = float(np.cos(np.float32(np.pi / 2)))
+    assert tangent_z < 0.0
+    d = np.array([direction(89.99, 0.0), [0.0, math.sqrt(1.0 - tangent_z ** 2), tangent_z],
+                  direction(90.01, 0.0)])
+    out = integ.render_directions(d, seed=0, spp=16384).numpy()
+    above, tangent, below = out[:, 1, :]
+    assert np.all(np.abs(tangent / above - 1.0) < 0.05), (tangent, above)
+    assert np.all(tangent > 1.5 * below), (tangent, below)
+
+
 # --- observers on the ground, above the atmosphere, far in space ---------------------------------
 
 SPACE_VIEWS = [(0.0, 0.0), (45.0, 0.0), (90.0, 0.0), (110.0, 180.0), (119.0, 180.0), (119.3, 180.0),

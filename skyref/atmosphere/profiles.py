@@ -26,6 +26,10 @@ from skyref.errors import ParameterError
 #: Largest altitude any profile accepts, m (well above any atmosphere top we model).
 MAX_ALTITUDE_M = 1.0e7
 
+#: Panel boundaries of an exponential profile along a ray, in scale heights (see
+#: :meth:`DensityProfile.panel_altitudes`).
+EXPONENTIAL_PANEL_SCALE_HEIGHTS = (1.0, 2.0, 3.0, 4.0, 6.0, 8.0)
+
 
 class DensityProfile:
     """Base class. Subclasses are frozen dataclasses and implement the methods below."""
@@ -43,6 +47,18 @@ class DensityProfile:
 
     def column(self, lower_m: float = 0.0, upper_m: float = math.inf) -> float:
         """Integral of the relative density over altitude from ``lower_m`` to ``upper_m``, m."""
+        raise NotImplementedError
+
+    def column_above(self, altitude_m, top_m: float, xp=np):
+        """Integral of the relative density from ``altitude_m`` (array, <= ``top_m``) up to
+        ``top_m``, m, evaluated with namespace ``xp`` (the vertical column a plane-parallel sun
+        ray crosses)."""
+        raise NotImplementedError
+
+    def panel_altitudes(self, top_m: float) -> tuple:
+        """Altitudes in (0, top_m) that a quadrature along a ray should take as panel
+        boundaries: where the density is not smooth, or about every scale height where it
+        falls off exponentially (see :mod:`skyref.plugins.line_integral`)."""
         raise NotImplementedError
 
     def to_dict(self) -> dict:
@@ -69,6 +85,16 @@ class ExponentialProfile(DensityProfile):
     def column(self, lower_m: float = 0.0, upper_m: float = math.inf) -> float:
         H = self.scale_height_m
         return H * (math.exp(-lower_m / H) - (0.0 if math.isinf(upper_m) else math.exp(-upper_m / H)))
+
+    def column_above(self, altitude_m, top_m: float, xp=np):
+        H = self.scale_height_m
+        return H * (xp.exp(-altitude_m * (1.0 / H)) - math.exp(-top_m / H))
+
+    def panel_altitudes(self, top_m: float) -> tuple:
+        # One panel per scale height near the ground, two higher up, where a profile has fallen
+        # by e^-4 and its error weighs that much less.
+        levels = [self.scale_height_m * f for f in EXPONENTIAL_PANEL_SCALE_HEIGHTS]
+        return tuple(h for h in levels if h < top_m)
 
     def to_dict(self) -> dict:
         return {"type": self.kind, "scale_height_m": self.scale_height_m}
@@ -136,6 +162,25 @@ class PiecewiseLinearProfile(DensityProfile):
         nodes = np.unique(nodes)
         values = np.interp(nodes, h, d)
         return float(np.sum(0.5 * (values[1:] + values[:-1]) * np.diff(nodes)))
+
+    def column_above(self, altitude_m, top_m: float, xp=np):
+        # Exact for the linear interpolant: each segment contributes the trapezoid from
+        # clip(h, h_i, h_{i+1}) to h_{i+1}; the end nodes' constant extensions are added.
+        h, d = self.altitudes_m, self.densities
+        top = min(top_m, h[-1])
+        total = d[-1] * xp.maximum(top_m - xp.maximum(altitude_m, h[-1]), 0.0)
+        below = xp.minimum(altitude_m, h[0])
+        total = total + d[0] * (h[0] - below)
+        for rho0, (h0, h1, slope) in zip(d, self._segments()):
+            if h0 >= top:
+                break
+            h1 = min(h1, top)
+            start = xp.minimum(xp.maximum(altitude_m, h0), h1)
+            total = total + (rho0 + 0.5 * slope * (start + h1 - 2.0 * h0)) * (h1 - start)
+        return total
+
+    def panel_altitudes(self, top_m: float) -> tuple:
+        return tuple(h for h in self.altitudes_m if 0.0 < h < top_m)
 
     def to_dict(self) -> dict:
         return {"type": self.kind, "altitudes_m": list(self.altitudes_m),

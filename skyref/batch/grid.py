@@ -17,7 +17,7 @@
     height = 32
     spp = 64                                 # samples per pixel, or instead:
     # target_relative_error = 0.01           # render until the 95th percentile of stderr/radiance <= 1%
-    passes = 4
+    passes = 16
     seed = 0
 
 An axis is a path into the scene's TOML tables (``sun.zenith_deg``, ``observer.altitude_m``,
@@ -71,7 +71,7 @@ class OutputSettings:
     spp: int | None = None
     target_relative_error: float | None = None
     max_spp: int = 16384
-    passes: int = 4
+    passes: int = 16
     seed: int = 0
 
     def __post_init__(self):

@@ -22,8 +22,16 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
+from skyref.plugins import quadrature
+from skyref.plugins.drjit_namespace import xp
+
 #: Distance used for rays that never leave a plane-parallel slab (horizontal rays), m.
 UNBOUNDED_DISTANCE_M = 1.0e9
+
+#: Rays whose cosine with the local zenith is above -GRAZING_COSINE do not descend: a tangent
+#: ray from the ground misses it (float32 rounding of a horizontal direction gives -4.4e-8; at
+#: 1e-6 the ray's elevation is -0.2 arcsec).
+GRAZING_COSINE = 1.0e-6
 
 
 class SphericalShell:
@@ -60,12 +68,15 @@ class SphericalShell:
 
     def distance_to_ground(self, p, d, h):
         """Distance along ``d`` to the ground sphere, or +inf if the ray misses it. A ray leaving
-        the ground (b >= 0) never hits it again: the sphere is convex."""
+        the ground (b >= 0) never hits it again: the sphere is convex. A ray tangent to the
+        ground at its start (the local zenith cosine above -GRAZING_COSINE: float32 gives
+        cos(pi/2) = -4.4e-8) misses it, as a horizontal ray must."""
         b = self._radial_projection(p, d)
         c = self._c_term(h, 0.0)
         disc = b * b - c
         t = c / (-b + dr.sqrt(dr.maximum(disc, 0.0)))
-        return dr.select((b < 0.0) & (disc >= 0.0), dr.maximum(t, 0.0), dr.inf)
+        descends = b < -GRAZING_COSINE * (self.R + h)
+        return dr.select(descends & (disc >= 0.0), dr.maximum(t, 0.0), dr.inf)
 
     def distance_to_top(self, p, d, h):
         """Distance along ``d`` to where the ray leaves the top sphere (from inside), via the
@@ -91,6 +102,36 @@ class SphericalShell:
         t = dr.clip(-self._radial_projection(p, d), 0.0, distance)
         return dr.minimum(dr.minimum(self.altitude(p + t * d), h_start), h_end)
 
+    def level_crossings(self, p, d, h, level):
+        """(down, up) distances along ``d`` to the sphere of altitude ``level`` (see
+        :func:`skyref.plugins.quadrature.level_crossings`)."""
+        return quadrature.level_crossings(self._radial_projection(p, d), h, level, self.R, xp)
+
+    def shadow_interval(self, p, d, length, sun):
+        """[t_in, t_out] within [0, length] where p + t d lies in the planet's shadow for the
+        sun direction ``sun`` (unit): inside the cylinder of radius R behind the planet. A line
+        meets that convex region in one interval; none gives t_in = t_out = length."""
+        e = mi.Vector3f(p.x, p.y, p.z + self._centre)      # from the planet's centre
+        e_along, d_along = dr.dot(e, sun), dr.dot(d, sun)
+        e_perp, d_perp = e - e_along * sun, d - d_along * sun
+        a = dr.squared_norm(d_perp)
+        b = dr.dot(e_perp, d_perp)
+        c = dr.squared_norm(e_perp) - self.R * self.R
+        disc = b * b - a * c
+        root = dr.sqrt(dr.maximum(disc, 0.0))
+        inv_a = dr.rcp(dr.maximum(a, 1e-12))
+        meets = (disc > 0.0) & (a > 1e-12)
+        t_in = dr.select(meets, (-b - root) * inv_a, dr.select(c < 0.0, -dr.inf, dr.inf))
+        t_out = dr.select(meets, (-b + root) * inv_a, dr.select(c < 0.0, dr.inf, -dr.inf))
+        # ... and behind the planet: e . sun + t d . sun < 0
+        t_behind = -e_along / dr.select(d_along == 0.0, 1e-30, d_along)
+        t_in = dr.select(d_along < 0.0, dr.maximum(t_in, t_behind), t_in)
+        t_out = dr.select(d_along > 0.0, dr.minimum(t_out, t_behind), t_out)
+        t_out = dr.select((d_along == 0.0) & (e_along >= 0.0), -dr.inf, t_out)
+        t_in, t_out = dr.clip(t_in, 0.0, length), dr.clip(t_out, 0.0, length)
+        empty = t_out <= t_in
+        return dr.select(empty, length, t_in), dr.select(empty, length, t_out)
+
 
 class PlaneParallelSlab:
     """Flat ground at altitude 0 and flat top at ``thickness_m``, observer at
@@ -108,7 +149,7 @@ class PlaneParallelSlab:
         return mi.Vector3f(0.0, 0.0, 1.0) + 0.0 * p
 
     def distance_to_ground(self, p, d, h):
-        return dr.select(d.z < 0.0, dr.maximum(h, 0.0) / -d.z, dr.inf)
+        return dr.select(d.z < -GRAZING_COSINE, dr.maximum(h, 0.0) / -d.z, dr.inf)
 
     def distance_to_top(self, p, d, h):
         t = dr.select(d.z > 0.0, dr.maximum(self.H - h, 0.0) / d.z, UNBOUNDED_DISTANCE_M)
@@ -119,3 +160,12 @@ class PlaneParallelSlab:
 
     def lowest_altitude(self, p, d, distance, h_start, h_end):
         return dr.minimum(h_start, h_end)
+
+    def level_crossings(self, p, d, h, level):
+        t = (level - h) / dr.select(d.z == 0.0, 1e-30, d.z)
+        return dr.select(d.z < 0.0, t, -dr.inf), dr.select(d.z > 0.0, t, dr.inf)
+
+    def shadow_interval(self, p, d, length, sun):
+        """A flat ground casts no shadow in the air (a sun below the horizon lights nothing:
+        its optical depth is infinite)."""
+        return mi.Float(length), mi.Float(length)

@@ -53,7 +53,10 @@ import numpy as np
 
 from skyref.atmosphere import solar_irradiance
 from skyref.plugins.geometry import PlaneParallelSlab, SphericalShell
+from skyref.plugins.line_integral import LineIntegral
 from skyref.plugins.optics import AtmosphereOptics, atmosphere_from_property, direction_with_cosine
+from skyref.plugins.quadrature import panel_levels
+from skyref.plugins.sun_optical_depth import SunOpticalDepth
 from skyref.scene import SUN_ANGULAR_RADIUS_DEG, direction_from_angles
 from skyref.sky import ORDER_NAMES
 
@@ -81,6 +84,18 @@ SHADOW_ROULETTE = 0.05
 
 #: Russian roulette starts at this scattering order.
 ROULETTE_DEPTH = 3
+
+#: The estimators: ``delta_tracking`` (the default: spectral tracking with next-event estimation
+#: at every candidate point) and ``line_integral`` (experimental: single scattering by quadrature
+#: along every segment, forced collisions; see :mod:`skyref.plugins.line_integral` for where its
+#: quadrature does not yet meet its error bound), independent of each other.
+ESTIMATORS = ("line_integral", "delta_tracking")
+DEFAULT_ESTIMATOR = "delta_tracking"
+
+#: The line-integral estimator plays Russian roulette from this many vertices on, on paths whose
+#: largest channel throughput is below LINE_ROULETTE_THROUGHPUT (survival = throughput / it).
+LINE_ROULETTE_DEPTH = 2
+LINE_ROULETTE_THROUGHPUT = 0.1
 
 
 class SunLight:
@@ -151,15 +166,17 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
                        observer_altitude_m=props.get("observer_altitude", 0.0),
                        geometry=props.get("geometry", "spherical"),
                        max_depth=props.get("max_depth", 64),
-                       wavelengths_per_path=props.get("wavelengths_per_path", 0))
+                       wavelengths_per_path=props.get("wavelengths_per_path", 0),
+                       estimator=props.get("estimator", DEFAULT_ESTIMATOR))
 
     def configure(self, atmosphere, wavelengths_nm, sun_zenith_deg, sun_azimuth_deg,
                   sun_angular_radius_deg, limb_darkening=False, observer_altitude_m=0.0,
-                  geometry="spherical", max_depth=64, wavelengths_per_path=0):
+                  geometry="spherical", max_depth=64, wavelengths_per_path=0, estimator=DEFAULT_ESTIMATOR):
         """Set the atmosphere, wavelength grid (nm), sun, observer and estimator settings."""
         from skyref.atmosphere.validation import check_choice, check_number
 
         check_choice("geometry", geometry, ("spherical", "plane_parallel"))
+        self.estimator = check_choice("estimator", estimator, ESTIMATORS)
         self.optics = AtmosphereOptics(atmosphere, wavelengths_nm)
         self.wavelengths_nm = self.optics.wavelengths_nm
         n = len(self.wavelengths_nm)
@@ -178,8 +195,12 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         self.sun = SunLight(direction_from_angles(sun_zenith_deg, sun_azimuth_deg),
                             math.radians(sun_angular_radius_deg), solar_irradiance(self.wavelengths_nm),
                             limb_darkening)
+        if self.estimator == "line_integral":
+            self.line = LineIntegral(self.optics, self.geometry, SunOpticalDepth(atmosphere, self.geometry),
+                                     panel_levels(atmosphere))
         #: Optional Mitsuba scene whose shapes stand in the atmosphere (terrain, buildings):
-        #: Lambertian, grey albedo = the mean of their BSDF's diffuse reflectance.
+        #: Lambertian, grey albedo = the mean of their BSDF's diffuse reflectance. Objects are
+        #: traced by the delta-tracking estimator (the line integral assumes open sky).
         self.objects = None
 
     # --- Mitsuba plumbing ---------------------------------------------------------------------
@@ -205,30 +226,37 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
 
     # --- rendering ----------------------------------------------------------------------------
 
-    def render_orders(self, sensor, seed: int, spp: int, pixel_centres: bool = False) -> mi.TensorXf:
-        """Render one pass through a Mitsuba sensor: a tensor (H, W, 4, N) of radiance per pixel,
-        scattering order (``ORDER_NAMES``) and grid wavelength, W m^-2 sr^-1 nm^-1. Samples
-        cover each pixel uniformly, or look along its centre only (``pixel_centres``)."""
+    def render_orders(self, sensor, seed: int, spp: int, pixel_centres: bool = False, batches: int = 1) -> mi.TensorXf:
+        """Render through a Mitsuba sensor: a tensor (H, W, 4, N) of radiance per pixel,
+        scattering order (``ORDER_NAMES``) and grid wavelength, W m^-2 sr^-1 nm^-1, from ``spp``
+        samples per pixel; with ``batches`` > 1, (batches, H, W, 4, N) from as many independent
+        batches of ``spp`` samples, traced in one launch. Samples cover each pixel uniformly, or
+        look along its centre only (``pixel_centres``)."""
         width, height = (int(x) for x in sensor.film().crop_size())
-        sampler, pixel = self._wavefront(seed, width * height, spp)
+        sampler, pixel, batch = self._wavefront(seed, width * height, spp, batches)
         offset = mi.Vector2f(0.5) if pixel_centres else sampler.next_2d()
         position = mi.Vector2f(mi.Float(pixel % width), mi.Float(pixel // width)) + offset
         film_uv = position * mi.Vector2f(1.0 / width, 1.0 / height)
         ray, weight = sensor.sample_ray(time=0.0, sample1=sampler.next_1d(), sample2=film_uv,
                                         sample3=sampler.next_2d(), active=True)
         valid = dr.max(mi.Spectrum(weight), axis=0) > 0.0
-        image = self._estimate(sampler, pixel, width * height, spp, ray.o, ray.d, valid)
-        return mi.TensorXf(image, (height, width, len(ORDER_NAMES), len(self.wavelengths_nm)))
+        image = self._estimate(sampler, pixel, batch, width * height, spp, batches, ray.o, ray.d, valid)
+        return self._tensor(image, batches, (height, width))
 
-    def render_directions(self, directions, seed: int, spp: int) -> mi.TensorXf:
+    def render_directions(self, directions, seed: int, spp: int, batches: int = 1) -> mi.TensorXf:
         """Radiance seen from the observer along given unit directions (array (M, 3), east-north-
-        up): a tensor (M, 4, N) like :meth:`render_orders`, without a sensor or pixel filter."""
+        up): a tensor (M, 4, N) like :meth:`render_orders` (or (batches, M, 4, N)), without a
+        sensor or pixel filter."""
         directions = np.asarray(directions, dtype=np.float32).reshape(-1, 3)
         count = directions.shape[0]
-        sampler, target = self._wavefront(seed, count, spp)
+        sampler, target, batch = self._wavefront(seed, count, spp, batches)
         d = dr.gather(mi.Vector3f, mi.Vector3f(*(mi.Float(directions[:, i]) for i in range(3))), target)
-        image = self._estimate(sampler, target, count, spp, mi.Point3f(0.0), d, mi.Bool(True))
-        return mi.TensorXf(image, (count, len(ORDER_NAMES), len(self.wavelengths_nm)))
+        image = self._estimate(sampler, target, batch, count, spp, batches, mi.Point3f(0.0), d, mi.Bool(True))
+        return self._tensor(image, batches, (count,))
+
+    def _tensor(self, image, batches, shape):
+        shape = (*shape, len(ORDER_NAMES), len(self.wavelengths_nm))
+        return mi.TensorXf(image, ((batches,) if batches > 1 else ()) + shape)
 
     def directional_derivative(self, directions, parameter: str, seed: int, spp: int):
         """Radiance along ``directions`` (as :meth:`render_directions`) and its derivative with
@@ -245,15 +273,18 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         finally:
             self.optics.set_parameter(parameter, original)
 
-    def _wavefront(self, seed, targets, spp):
-        """A seeded sampler for ``targets * spp`` samples and each sample's target index."""
-        wavefront = targets * spp
+    def _wavefront(self, seed, targets, spp, batches):
+        """A seeded sampler for ``targets * spp * batches`` samples, each sample's target and
+        batch index. The seed and counts are opaque: calls with other seeds or sample counts
+        reuse the compiled kernels (the line-integral estimator's take seconds to compile)."""
+        wavefront = targets * spp * batches
         sampler = mi.load_dict({"type": "independent"})
-        sampler.seed(seed, wavefront)
-        return sampler, dr.arange(mi.UInt32, wavefront) // spp
+        sampler.seed(dr.opaque(mi.UInt32, seed), wavefront)
+        index = dr.arange(mi.UInt32, wavefront)
+        return sampler, index // dr.opaque(mi.UInt32, spp * batches), index % dr.opaque(mi.UInt32, batches)
 
-    def _estimate(self, sampler, target, targets, spp, origin, direction, valid):
-        """Trace one sample per lane and average into a flat (targets, 4, N) buffer."""
+    def _estimate(self, sampler, target, batch, targets, spp, batches, origin, direction, valid):
+        """Trace one sample per lane and average into a flat (batches, targets, 4, N) buffer."""
         n = len(self.wavelengths_nm)
         # Wavelength channels: index (j + k * stride) mod N, each grid wavelength carried with
         # probability K / N.
@@ -261,11 +292,11 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         first = dr.minimum(mi.UInt32(sampler.next_1d() * n), n - 1)
         indices = [(first + k * stride) % n for k in range(self.channels)]
         orders = self.trace(sampler, mi.Point3f(origin), mi.Vector3f(direction), indices, valid)
-        scale = n / (self.channels * spp)
-        image = dr.zeros(mi.Float, targets * len(ORDER_NAMES) * n)
+        scale = dr.opaque(mi.Float, n / (self.channels * spp))
+        image = dr.zeros(mi.Float, batches * targets * len(ORDER_NAMES) * n)
         for order, contribution in enumerate(orders):
             for k, index in enumerate(indices):
-                slot = (target * len(ORDER_NAMES) + order) * n + index
+                slot = ((batch * targets + target) * len(ORDER_NAMES) + order) * n + index
                 dr.scatter_reduce(dr.ReduceOp.Add, image, contribution[k] * scale, slot, valid)
         return image
 
@@ -295,10 +326,128 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         h_low = self.geometry.lowest_altitude(p, d, length, h, h_end)
         return MAJORANT_SAFETY * self.optics.majorant(channels, h_low, dr.maximum(h, h_end))
 
-    @dr.syntax
     def trace(self, sampler, origin, direction, indices, active):
         """Radiance along camera rays (origin in the observer frame, unit direction) for the
-        channels ``indices``: a list of 4 ArrayXf (K channels), one per scattering order.
+        channels ``indices``: a list of 4 ArrayXf (K channels), one per scattering order
+        (``ORDER_NAMES``), by the configured estimator."""
+        if self.estimator == "line_integral" and self.objects is None:
+            return self._trace_line_integral(sampler, origin, direction, indices, active)
+        return self._trace_delta_tracking(sampler, origin, direction, indices, active)
+
+    def _enter_atmosphere(self, origin, direction, active):
+        """A camera ray's start in the atmosphere: an observer above it first moves to where the
+        ray enters. Returns (point, altitude, whether the ray misses the atmosphere)."""
+        geometry = self.geometry
+        p = mi.Point3f(origin)
+        h = geometry.altitude(p)
+        outside = h >= geometry.H
+        t_entry = geometry.distance_to_entry(p, direction, h)
+        enters = outside & (t_entry < dr.inf)
+        p = dr.select(enters, p + t_entry * direction, p)
+        h = dr.select(enters, geometry.H, h)
+        return p, h, mi.Bool(active) & outside & ~enters
+
+    def _solar_disk(self, d):
+        """Radiance of the solar disk seen along ``d`` per unit E_sun, sr^-1."""
+        return self.sun.radiance_factor(dr.dot(d, self.sun.direction)) / self.sun.solid_angle
+
+    @dr.syntax
+    def _trace_line_integral(self, sampler, origin, direction, indices, active):
+        """The line-integral estimator (:mod:`skyref.plugins.line_integral`). One loop iteration
+        is one segment of the path: the sunlight scattered once along it is integrated by
+        quadrature and filed under the order (vertices so far) + 1, as is the sunlight the
+        ground reflects at its end; the path then goes on from a forced collision on the segment
+        (or from the ground), with Russian roulette from ``LINE_ROULETTE_DEPTH`` vertices on.
+        Camera rays from an observer on the ground only rise, so their segment is peeled off
+        the loop with the cheaper rising-only panels."""
+        channels = self.optics.channel_coefficients(indices)
+        e_sun = self.sun.channel_irradiance(indices)
+        d = mi.Vector3f(direction)
+        p, h, misses = self._enter_atmosphere(origin, d, active)
+        direct = dr.select(misses, e_sun * self._solar_disk(d), channels.zeros())
+        single, double, higher = channels.zeros(), channels.zeros(), channels.zeros()
+        throughput = channels.zeros() + 1.0
+        alive = mi.Bool(active) & ~misses
+
+        light, sun_disk, p, d, h, throughput, alive = self._line_segment(
+            sampler, channels, e_sun, p, d, h, throughput, alive, camera=True,
+            rising_only=self.geometry.h0 == 0.0)
+        direct += sun_disk
+        single += light
+        depth = mi.UInt32(1)
+        alive &= depth < self.max_depth
+
+        while dr.hint(alive, label="atmosphere line-integral path"):
+            light, _, p, d, h, throughput, alive = self._line_segment(
+                sampler, channels, e_sun, p, d, h, throughput, alive, camera=False, rising_only=False)
+            double = dr.select(depth == 1, double + light, double)
+            higher = dr.select(depth >= 2, higher + light, higher)
+            depth += 1
+            # Russian roulette once the largest channel throughput falls below LINE_ROULETTE_THROUGHPUT
+            survival = dr.minimum(dr.max(dr.detach(throughput), axis=0) / LINE_ROULETTE_THROUGHPUT, 1.0)
+            roulette = alive & (depth >= LINE_ROULETTE_DEPTH)
+            survives = sampler.next_1d() < survival
+            throughput = dr.select(roulette & survives, throughput / survival, throughput)
+            alive &= ~(roulette & ~survives) & (depth < self.max_depth)
+
+        return [direct, single, double, higher]
+
+    def _line_segment(self, sampler, channels, e_sun, p, d, h, throughput, alive, camera, rising_only):
+        """One segment of a line-integral path from vertex ``p`` (altitude ``h``) along ``d``.
+        Returns (light filed under this segment's order, the solar disk seen through it when
+        ``camera``, and the next vertex: point, direction, altitude, throughput, alive)."""
+        geometry, optics, sun = self.geometry, self.optics, self.sun
+        t_ground = geometry.distance_to_ground(p, d, h)
+        t_top = geometry.distance_to_top(p, d, h)
+        on_ground = t_ground < t_top
+        length = dr.select(on_ground, t_ground, t_top)
+        sun_direction, sun_factor = sun.sample_direction(sampler.next_2d())
+        grey_s, grey_t, grey_albedo = channels.grey(throughput)
+        sunlight, transmittance, quadrature = self.line.integrate(
+            channels, p, d, h, length, sun_direction, (grey_s, grey_t), rising_only)
+        light = throughput * sunlight * e_sun * sun_factor
+        sun_disk = channels.zeros()
+        if camera:
+            sun_disk = dr.select(alive & ~on_ground, throughput * transmittance * e_sun * self._solar_disk(d),
+                                 sun_disk)
+
+        # -- the ground at the segment's end reflects sunlight (Lambertian; lit iff the sun is
+        # above its horizon: the planet is convex) -------------------------------------------------
+        ground = p + length * d
+        up = geometry.up(ground)
+        cos_sun = dr.dot(up, sun_direction)
+        tau_sun = self.line.sun_depth(mi.Float(0.0), cos_sun)
+        reflected = (throughput * transmittance * channels.albedo * e_sun * sun_factor
+                     * dr.exp(-channels.optical_depth(tau_sun)) * (dr.maximum(cos_sun, 0.0) / math.pi))
+        light += dr.select(on_ground & (cos_sun > 0.0), reflected, 0.0)
+        light = dr.select(alive, light, 0.0)
+
+        # -- where the path goes on: a forced collision in the air, or the ground --------------------
+        air_mass = sum(quadrature.masses, mi.Float(0.0))
+        grey_transmittance = dr.exp(-sum((g * tau for g, tau in zip(grey_t, quadrature.total) if g is not None),
+                                        mi.Float(0.0)))
+        ground_mass = dr.select(on_ground, grey_transmittance * grey_albedo, 0.0)
+        p_air = air_mass / dr.maximum(air_mass + ground_mass, 1e-30)
+        alive &= (air_mass + ground_mass) > 0.0
+        in_air = sampler.next_1d() < p_air
+        u_panel, u_position = sampler.next_1d(), sampler.next_1d()
+        x, hx, weight, (parts, sigma_s, _) = self.line.sample_collision(channels, quadrature, p, d, u_panel,
+                                                                        u_position)
+        u_component, u_direction = sampler.next_1d(), sampler.next_2d()
+        mu, pdf = optics.sample_phase(parts, sigma_s, u_component, u_direction.x)
+        d_air = direction_with_cosine(d, mu, u_direction.y)
+        air_throughput = throughput * weight * optics.phase(parts, sigma_s, mu) / (pdf * dr.maximum(p_air, 1e-30))
+        d_ground = mi.Frame3f(up).to_world(mi.warp.square_to_cosine_hemisphere(u_direction))
+        ground_throughput = throughput * transmittance * channels.albedo / dr.maximum(1.0 - p_air, 1e-30)
+        p = dr.select(in_air, x, ground)
+        h = dr.select(in_air, hx, 0.0)
+        d = dr.select(in_air, d_air, d_ground)
+        throughput = dr.select(in_air, air_throughput, ground_throughput)
+        return light, sun_disk, p, d, h, throughput, alive
+
+    @dr.syntax
+    def _trace_delta_tracking(self, sampler, origin, direction, indices, active):
+        """The delta-tracking estimator (the baseline, described in the module docstring).
 
         One loop does everything, one tracking step per iteration, so that it stays a single
         symbolic loop (fast, and differentiable in forward mode: Dr.Jit 1.5 miscompiles forward
@@ -313,16 +462,9 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         direct, single, double, higher = channels.zeros(), channels.zeros(), channels.zeros(), channels.zeros()
 
         # -- the camera ray; an observer above the atmosphere first moves to where it enters ------
-        p = mi.Point3f(origin)
         d = mi.Vector3f(direction)
-        h = geometry.altitude(p)
-        outside = h >= geometry.H
-        t_entry = geometry.distance_to_entry(p, d, h)
-        enters = outside & (t_entry < dr.inf)
-        p = dr.select(enters, p + t_entry * d, p)
-        h = dr.select(enters, geometry.H, h)
-        misses = mi.Bool(active) & outside & ~enters
-        direct = dr.select(misses, e_sun * (sun.radiance_factor(dr.dot(d, sun.direction)) / sun.solid_angle), direct)
+        p, h, misses = self._enter_atmosphere(origin, d, active)
+        direct = dr.select(misses, e_sun * self._solar_disk(d), direct)
 
         throughput = channels.zeros() + 1.0
         alive = mi.Bool(active) & ~misses
@@ -409,8 +551,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             h = dr.select(reaches_end, h_end, h)
             on_ground = reaches_end & hits_surface
             escapes = reaches_end & ~hits_surface
-            direct = dr.select(escapes & (depth == 0), direct + throughput * e_sun
-                               * (sun.radiance_factor(dr.dot(d, sun.direction)) / sun.solid_angle), direct)
+            direct = dr.select(escapes & (depth == 0), direct + throughput * e_sun * self._solar_disk(d), direct)
             alive &= ~escapes
             # A surface vertex: the planet's ground, or an object (normal offset: no self-hits).
             on_object = on_ground & hits_object

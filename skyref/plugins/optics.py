@@ -301,10 +301,31 @@ class PathChannels:
         self.count = count
         self.coefficients = coefficients
         self.albedo = albedo
-        self.bounds = []
-        for s, a in coefficients:
-            total = s if a is None else (a if s is None else s + a)
-            self.bounds.append(dr.detach(dr.max(total, axis=0)))
+        #: extinction at relative density 1 per component (ArrayXf, or None for a zero term)
+        self.extinction = [s if a is None else (a if s is None else s + a) for s, a in coefficients]
+        self.bounds = [dr.detach(dr.max(k, axis=0)) for k in self.extinction]
 
     def zeros(self):
         return mi.ArrayXf([mi.Float(0.0)] * self.count)
+
+    def optical_depth(self, unit_depths):
+        """Optical depth per channel from per-component optical depths at relative density 1
+        (m): sum_c k_c tau_c."""
+        total = self.zeros()
+        for k, tau in zip(self.extinction, unit_depths):
+            if k is not None:
+                total = total + k * tau
+        return total
+
+    def grey(self, throughput):
+        """Grey coefficients per component, the channel mean weighted by the path throughput
+        (detached; for sampling decisions): ([scattering or None], [extinction or None]) in m^-1
+        at relative density 1, and the grey ground albedo."""
+        w = dr.detach(throughput)
+        inv = dr.rcp(dr.maximum(dr.sum(w, axis=0), 1e-30))
+
+        def mean(k):
+            return None if k is None else dr.detach(dr.sum(w * k, axis=0)) * inv
+
+        return ([mean(s) for s, _ in self.coefficients], [mean(k) for k in self.extinction],
+                dr.detach(dr.sum(w * self.albedo, axis=0)) * inv)

@@ -1,0 +1,185 @@
+"""Single scattering along a whole ray segment, by quadrature, and a forced collision on it.
+
+For a segment from x (altitude h) along a unit direction omega, of length L, the sunlight that
+scatters once on it towards -omega is the line integral
+
+    S = E_sun  integral_0^L  sum_c sigma_s,c(t) p_c(omega . s)  T(0, t)  T_sun(t)  V(t)  dt
+
+(W m^-2 sr^-1 nm^-1 per unit path throughput), with s the direction to the sun, p_c the phase
+function of constituent c (constant along a straight segment: the sun is at infinity),
+T(0, t) = exp(-tau(0, t)) the transmittance along the segment, T_sun(t) the transmittance to
+the top of the atmosphere towards the sun, and V(t) = 0 in the planet's shadow. The integral is
+computed with the Gauss–Legendre panels of :mod:`skyref.plugins.quadrature` (split also where
+the segment enters and leaves the shadow, so that V is constant on each panel), the optical
+depth along the segment by the same rule, and the sun's by :mod:`skyref.plugins.sun_optical_depth`.
+Every optical depth is computed per constituent at relative density 1 and multiplied by each
+channel's coefficients, so the geometry is paid once for all wavelengths.
+
+The path then goes on from a *forced collision*: a point of the segment drawn with a density
+proportional to a grey proxy of sigma_s(t) T(0, t) (a panel by its quadrature mass, then a
+point uniform in the panel's variable u), weighted by the exact sigma_s(t) T(0, t) / pdf(t) per channel — or, if the
+segment ends on the ground, from the ground with probability proportional to its grey
+T(0, L) x albedo. Every path scatters: none is wasted on light that leaves the atmosphere.
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+from skyref.plugins.drjit_namespace import xp
+from skyref.plugins.quadrature import NODES_PER_PANEL, GaussLegendreRule, insert_sorted, ordered_breakpoints
+
+#: Grey optical thickness above which a panel's nodes are spaced evenly in transmittance.
+PANEL_THICKNESS = 0.05
+
+
+class SegmentQuadrature:
+    """The quadrature of one segment: its panels [a_i, b_i] and their changes of variable
+    (:meth:`LineIntegral._panel_map`), the optical depth per constituent at each panel's start
+    (``prefix``) and in total, and each panel's grey scattering mass (for the forced collision)."""
+
+    def __init__(self, panels, maps, prefix, total, masses):
+        self.panels = panels
+        self.maps = maps
+        self.prefix = prefix
+        self.total = total
+        self.masses = masses
+
+
+class LineIntegral:
+    """Single scattering and forced collisions along segments (module docstring) for the
+    ``optics`` of an atmosphere in ``geometry``, with the sun's optical depth ``sun_depth``
+    and the interior panel altitudes ``levels`` (m)."""
+
+    def __init__(self, optics, geometry, sun_depth, levels, nodes_per_panel: int = NODES_PER_PANEL):
+        self.optics = optics
+        self.geometry = geometry
+        self.sun_depth = sun_depth
+        self.levels = tuple(float(x) for x in levels)
+        self.rule = GaussLegendreRule(nodes_per_panel)
+
+    # --- the segment's panels ----------------------------------------------------------------
+
+    def _panels(self, p, d, h, length, sun, rising_only):
+        crossings = [self.geometry.level_crossings(p, d, h, level) for level in self.levels]
+        breakpoints = ordered_breakpoints(crossings, length, rising_only, xp)
+        t_in, t_out = self.geometry.shadow_interval(p, d, length, sun)
+        breakpoints = insert_sorted(insert_sorted(breakpoints, t_in, xp), t_out, xp)
+        panels = list(zip(breakpoints[:-1], breakpoints[1:]))
+        lit = [~((0.5 * (a + b) > t_in) & (0.5 * (a + b) < t_out)) for a, b in panels]
+        return panels, lit
+
+    def _densities(self, p, d, t):
+        x = p + t * d
+        h = self.geometry.altitude(x)
+        return x, h, [c.density(h) for c in self.optics.components]
+
+    # --- single scattering along the segment ----------------------------------------------------
+
+    def integrate(self, channels, p, d, h, length, sun, grey, rising_only=False):
+        """Single-scattered sunlight along the segment per channel (ArrayXf, to be multiplied by
+        E_sun), its transmittance T(0, L) per channel, and the :class:`SegmentQuadrature`.
+        ``grey`` = (grey scattering, grey extinction) coefficients per constituent (detached
+        Floats or None), for the forced collision's proxy. ``rising_only``: the caller
+        guarantees the segment never descends (a ray leaving the ground)."""
+        optics, rule = self.optics, self.rule
+        components = optics.components
+        panels, lit = self._panels(p, d, h, length, sun, rising_only)
+        cos_scatter = dr.dot(d, sun)
+        phase = [None if s is None else c.phase(cos_scatter)
+                 for c, (s, _) in zip(components, channels.coefficients)]
+        extinction = channels.extinction
+        grey_s, grey_t = grey
+        sunlight = channels.zeros()
+        prefix = [mi.Float(0.0) for _ in components]
+        prefixes, masses, maps = [], [], []
+        for (a, b), panel_lit in zip(panels, lit):
+            width = b - a
+            panel_map = self._panel_map(channels, p, d, a, width)
+            maps.append(panel_map)
+            stretch = [panel_map(u) for u in rule.nodes]
+            nodes = [self._densities(p, d, a + width * g) for g, _ in stretch]
+            # the integrand of every quadrature below, per constituent: rho(t(u)) dt/du
+            density_du = [[width * dg * r for r in rho] for (_, _, rho), (_, dg) in zip(nodes, stretch)]
+            prefixes.append(list(prefix))
+            mass = mi.Float(0.0)
+            for j, (x, hx, rho) in enumerate(nodes):
+                # optical depth from the segment's start to this node, per constituent
+                tau = [prefix[c] + sum(rule.cumulative[j][m] * density_du[m][c] for m in range(rule.count))
+                       for c in range(len(components))]
+                tau_sun = self.sun_depth(hx, dr.dot(self.geometry.up(x), sun))
+                exponent = channels.zeros()
+                source = channels.zeros()
+                for c in range(len(components)):
+                    if extinction[c] is not None:
+                        exponent = exponent + extinction[c] * (tau[c] + tau_sun[c])
+                    if phase[c] is not None:
+                        source = source + channels.coefficients[c][0] * (rho[c] * phase[c])
+                weight = width * stretch[j][1] * rule.weights[j]
+                sunlight = sunlight + source * dr.exp(-exponent) * dr.select(panel_lit, weight, 0.0)
+                # grey proxy of sigma_s(t) T(0, t), for the forced collision
+                grey_exponent = sum((g * tau[c] for c, g in enumerate(grey_t) if g is not None), mi.Float(0.0))
+                grey_source = sum((g * rho[c] for c, g in enumerate(grey_s) if g is not None), mi.Float(0.0))
+                mass = mass + weight * dr.detach(grey_source * dr.exp(-grey_exponent))
+            masses.append(mass)
+            prefix = [prefix[c] + sum(rule.weights[m] * density_du[m][c] for m in range(rule.count))
+                      for c in range(len(components))]
+        transmittance = dr.exp(-channels.optical_depth(prefix))
+        return sunlight, transmittance, SegmentQuadrature(panels, maps, prefixes, prefix, masses)
+
+    def _panel_map(self, channels, p, d, a, width):
+        """The change of variable t = a + width g(u), u in [0, 1], of one panel: uniform for an
+        optically thin panel, and for one of optical thickness kappa in its most transparent
+        channel (estimated at its midpoint) g(u) = -ln(1 - u (1 - e^-kappa)) / kappa, which
+        spaces the nodes evenly in that channel's transmittance (a horizontal ray through hazy
+        air loses e^-50 in its first panel). Every other channel's transmittance is then
+        (1 - u (1 - e^-kappa))^(k / k_min - 1), a low power of u that the rule integrates well.
+        Returns u -> (g(u), g'(u))."""
+        _, _, rho = self._densities(p, d, a + 0.5 * width)
+        kappa = dr.detach(width * dr.min(channels.optical_depth(rho), axis=0))
+        thick = kappa > PANEL_THICKNESS
+        loss = -dr.select(thick, dr.exp(-kappa) - 1.0, 0.0)
+        inv_kappa = dr.rcp(dr.select(thick, kappa, 1.0))
+
+        def stretch(u):
+            left = 1.0 - u * loss
+            return dr.select(thick, -dr.log(left) * inv_kappa, u), dr.select(thick, loss * inv_kappa / left, 1.0)
+
+        return stretch
+
+    # --- the forced collision ------------------------------------------------------------------
+
+    def sample_collision(self, channels, quadrature, p, d, u_panel, u_position):
+        """A point of the segment: the panel i chosen by its grey mass, then t = a_i + (b_i - a_i)
+        g_i(u) with u uniform (pdf(t) = (mass_i / total) / ((b_i - a_i) g_i'(u))). Returns (point, altitude, sigma_s(t) T(0, t) / pdf(t) per
+        channel, the local coefficients (parts, sigma_s, sigma_t) at the point). The caller
+        makes sure the total mass is positive."""
+        total = sum(quadrature.masses, mi.Float(0.0))
+        target = u_panel * total
+        cumulative = mi.Float(0.0)
+        a, width, mass = mi.Float(0.0), mi.Float(0.0), mi.Float(1.0)
+        g, dg = mi.Float(0.0), mi.Float(1.0)
+        prefix = [mi.Float(0.0) for _ in quadrature.total]
+        for (lo, hi), panel_map, panel_prefix, panel_mass in zip(quadrature.panels, quadrature.maps,
+                                                                 quadrature.prefix, quadrature.masses):
+            chosen = (target >= cumulative) & (panel_mass > 0.0)
+            a, width, mass = dr.select(chosen, lo, a), dr.select(chosen, hi - lo, width), dr.select(chosen, panel_mass, mass)
+            g_panel, dg_panel = panel_map(u_position)
+            g, dg = dr.select(chosen, g_panel, g), dr.select(chosen, dg_panel, dg)
+            prefix = [dr.select(chosen, q, old) for q, old in zip(panel_prefix, prefix)]
+            cumulative = cumulative + panel_mass
+        step = g * width
+        t = a + step
+        # optical depth from the panel's start to t, by the rule on [a, t]
+        partial = [mi.Float(0.0) for _ in prefix]
+        for u, w in zip(self.rule.nodes, self.rule.weights):
+            _, _, rho = self._densities(p, d, a + u * step)
+            partial = [q + (w * step) * r for q, r in zip(partial, rho)]
+        tau = [q + r for q, r in zip(prefix, partial)]
+        x = p + t * d
+        hx = self.geometry.altitude(x)
+        parts, sigma_s, sigma_t = self.optics.local(channels, hx)
+        pdf = mass / (total * dr.maximum(width * dg, 1e-30))
+        weight = sigma_s * dr.exp(-channels.optical_depth(tau)) / pdf
+        return x, hx, weight, (parts, sigma_s, sigma_t)

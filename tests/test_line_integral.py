@@ -1,0 +1,225 @@
+"""The line-integral estimator (``estimator="line_integral"``) and its deterministic parts.
+
+* The quadrature's building blocks: the Gauss–Legendre rule's cumulative matrix, the panel
+  breakpoints along a ray, the profiles' vertical columns, the planet's shadow along a ray.
+* The sun's optical-depth table against direct quadrature and against the model's own,
+  independently written slant optical depth (``Atmosphere.optical_depth``).
+* Single scattering by quadrature against the same quadrature refined (8 nodes per panel,
+  every panel split in three): within 1e-4 where the rule is fit for it; the hard cases where it
+  is not yet (optically thick horizons, twilight) are ``xfail(strict=True)``, so that the day
+  they pass is noticed.
+* The whole estimator against the independent delta-tracking estimator (z-scores, 16 seeds,
+  relative standard error < 0.25% so that a 1% bias fails).
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from skyref.plugins.quadrature import GaussLegendreRule, level_crossings, ordered_breakpoints, panel_levels
+
+WL = [680.0, 550.0, 440.0]
+R = 6_360_000.0
+
+
+def test_cumulative_matrix_integrates_polynomials_of_degree_below_n_exactly():
+    rule = GaussLegendreRule(3)
+    u = np.array(rule.nodes)
+    for degree in range(3):
+        values = u ** degree
+        partial = np.array(rule.cumulative) @ values
+        assert np.allclose(partial, u ** (degree + 1) / (degree + 1), rtol=1e-12, atol=1e-15)
+    # the full rule: exact to degree 2n - 1
+    assert math.isclose(np.dot(rule.weights, u ** 5), 1.0 / 6.0, rel_tol=1e-12)
+
+
+def test_breakpoints_are_ordered_and_fall_on_the_levels():
+    """Random rays inside a 60 km shell: the breakpoints increase, lie in [0, L], and every
+    breakpoint strictly inside (0, L) is at the altitude of one of the levels (to 1 mm), or is
+    the closest approach (where the levels below it collapse)."""
+    rng = np.random.default_rng(3)
+    h = 60_000.0 * rng.uniform(0.0, 1.0, 2000) ** 2
+    mu = rng.uniform(-1.0, 1.0, 2000)
+    r = R + h
+    top = R + 60_000.0
+    r_mu = r * mu
+    length = -r_mu + np.sqrt(r_mu ** 2 + top ** 2 - r ** 2)
+    hits_ground = (mu < 0.0) & (r_mu ** 2 - (r ** 2 - R ** 2) > 0.0)
+    length = np.where(hits_ground, -r_mu - np.sqrt(np.maximum(r_mu ** 2 - (r ** 2 - R ** 2), 0.0)), length)
+    levels = (1200.0, 2400.0, 10_000.0, 25_000.0, 40_000.0)
+    crossings = [level_crossings(r_mu, h, level, R, np) for level in levels]
+    points = np.array(ordered_breakpoints(crossings, length, rising_only=False, xp=np))
+    assert np.all(np.diff(points, axis=0) >= 0.0)
+    assert np.all(points >= 0.0) and np.all(points <= length + 1e-6)
+    inside = (points > 1e-3) & (points < length - 1e-3) & (np.abs(points + r_mu) > 1e-3)
+    altitude = np.sqrt(r ** 2 + 2.0 * r_mu * points + points ** 2) - R
+    distance = np.min(np.abs(altitude[..., None] - np.array(levels)), axis=-1)
+    assert np.all(distance[inside] < 1e-3), np.max(distance[inside])
+
+
+def test_panel_levels_keep_the_kinks():
+    from skyref.atmosphere import preset
+
+    levels = panel_levels(preset("bruneton2017"))
+    assert {10_000.0, 25_000.0, 40_000.0} <= set(levels)
+    assert all(0.0 < x < 60_000.0 for x in levels) and list(levels) == sorted(levels)
+
+
+@pytest.mark.parametrize("profile", ["exponential", "tent", "piecewise"])
+def test_column_above_matches_column(profile):
+    from skyref.atmosphere import ExponentialProfile, PiecewiseLinearProfile
+
+    p = {"exponential": ExponentialProfile(8000.0), "tent": PiecewiseLinearProfile.tent(10e3, 25e3, 40e3),
+         "piecewise": PiecewiseLinearProfile((500.0, 2e3, 7e3), (1.0, 0.5, 0.2))}[profile]
+    h = np.array([0.0, 300.0, 5e3, 12e3, 30e3, 45e3, 59e3])
+    assert np.allclose(p.column_above(h, 60e3), [p.column(x, 60e3) for x in h], rtol=1e-12, atol=1e-9)
+
+
+def test_shadow_interval(mi):
+    """A ray from 10 km above the night side's terminator through the shadow: points inside
+    [t_in, t_out] are behind the planet within its radius of the sun's axis, points outside are
+    not (checked in float64)."""
+    import drjit as dr
+
+    from skyref.plugins.geometry import SphericalShell
+
+    shell = SphericalShell(R, R + 60_000.0, 10_000.0)
+    sun = np.array([1.0, 0.0, 0.0])                    # the sun on the horizon, to the east
+    p = np.zeros(3)
+    directions = np.array([[-1.0, 0.0, 0.0], [-0.9, 0.0, -0.1], [-0.5, 0.5, -0.2], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    length = 2_000_000.0
+    d = mi.Vector3f(*(mi.Float(directions[:, i]) for i in range(3)))
+    t_in, t_out = shell.shadow_interval(mi.Point3f(0.0), d, mi.Float(length), mi.Vector3f(*(float(x) for x in sun)))
+    t_in, t_out = np.array(t_in), np.array(t_out)
+    centre = np.array([0.0, 0.0, -(R + 10_000.0)])
+    for k, direction in enumerate(directions):
+        t = np.linspace(0.0, length, 4001)
+        x = p + t[:, None] * direction - centre
+        along = x @ sun
+        shadow = (along < 0.0) & (np.linalg.norm(x - along[:, None] * sun, axis=1) < R)
+        inside = (t > t_in[k] + 1.0) & (t < t_out[k] - 1.0)
+        outside = (t < t_in[k] - 1.0) | (t > t_out[k] + 1.0)
+        assert np.all(shadow[inside]) and not np.any(shadow[outside]), k
+    assert t_in[3] == t_out[3] == length           # towards the sun: never in shadow
+
+
+# --- the sun's optical depth -----------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("turbidity", [None, 6.0], ids=["bruneton2017", "turbidity6"])
+def test_sun_optical_depth_table(mi, turbidity):
+    """Random points and sun directions above the ground's horizon: the table's transmittance
+    at 440 nm (all constituents) within 1e-4 of the direct quadrature, and the direct
+    quadrature within 1e-6 (relative, rays not grazing the ground) of Atmosphere.optical_depth,
+    an independent 256 x 16-node geometric-panel rule."""
+    import skyref.atmosphere as atm
+    from skyref.plugins.geometry import SphericalShell
+    from skyref.plugins.sun_optical_depth import SunOpticalDepth, unit_optical_depth
+
+    atmosphere = atm.bruneton2017() if turbidity is None else atm.from_turbidity(turbidity)
+    table = SunOpticalDepth(atmosphere, SphericalShell(atmosphere.bottom_radius_m, atmosphere.top_radius_m, 0.0))
+    rng = np.random.default_rng(1)
+    h = atmosphere.thickness_m * rng.uniform(0.0, 1.0, 50_000) ** 2
+    r = R + h
+    mu = rng.uniform(-np.sqrt(1.0 - (R / r) ** 2), 1.0)
+    profiles = tuple(c.profile for c in atmosphere.constituents)
+    direct = unit_optical_depth(profiles, R, atmosphere.top_radius_m, panel_levels(atmosphere), h, mu)
+    looked_up = np.stack([np.array(x) for x in table(mi.Float(h), mi.Float(mu))], axis=-1)
+    k = np.array([c.extinction_coefficient([440.0])[0] for c in atmosphere.constituents])
+    error = np.abs(np.exp(-looked_up @ k) - np.exp(-direct @ k))
+    print(f"table: max |dT| {error.max():.2e}, p99 {np.percentile(error, 99):.2e}")
+    assert error.max() < 1e-4
+    for hi, mui in [(0.0, 1.0), (0.0, 0.2), (5000.0, 0.05), (20_000.0, -0.05), (500.0, 0.0)]:
+        reference = atmosphere.optical_depth([440.0], hi, mui)[0]
+        mine = unit_optical_depth(profiles, R, atmosphere.top_radius_m, panel_levels(atmosphere), hi, mui) @ k
+        assert math.isclose(mine, reference, rel_tol=1e-6), (hi, mui, mine, reference)
+
+
+# --- single scattering: the rule against itself refined --------------------------------------------
+
+
+def line_integrator(mi, atmosphere, sun_zenith, max_depth=1, nodes=None, split=1):
+    """An integrator with the line-integral estimator; ``nodes``/``split`` refine its rule (more
+    nodes per panel, every panel split into ``split``)."""
+    from skyref.plugins.line_integral import LineIntegral
+    from skyref.render import build_integrator
+    from skyref.scene import RenderSettings, Scene, Sun
+
+    scene = Scene(atmosphere=atmosphere, sun=Sun(sun_zenith, 180.0), wavelengths=WL,
+                  render=RenderSettings(max_depth=max_depth))
+    integ = build_integrator(scene)
+    integ.configure(scene.atmosphere, scene.wavelengths_nm, sun_zenith, 180.0, scene.sun.angular_radius_deg,
+                    max_depth=max_depth, estimator="line_integral")
+    if nodes is not None:
+        levels = panel_levels(atmosphere)
+        full = (0.0,) + levels + (atmosphere.thickness_m,)
+        fine = sorted(set(levels) | {a + (b - a) * j / split for a, b in zip(full[:-1], full[1:])
+                                     for j in range(1, split)})
+        integ.line = LineIntegral(integ.optics, integ.geometry, integ.line.sun_depth, fine, nodes)
+    return integ
+
+
+def single_scattering_error(mi, atmosphere, sun_zenith, views):
+    """Relative difference of the ``single`` order, the default rule against the refined one,
+    with the same random numbers (the same sun directions in the disk): quadrature error only."""
+    from skyref.scene import direction_from_angles
+
+    d = np.array([direction_from_angles(z, a) for z, a in views])
+    default = line_integrator(mi, atmosphere, sun_zenith).render_directions(d, seed=5, spp=256).numpy()
+    refined = line_integrator(mi, atmosphere, sun_zenith, nodes=8, split=3).render_directions(d, seed=5, spp=256)
+    return default[:, 1] / refined.numpy()[:, 1] - 1.0
+
+
+def test_single_scattering_quadrature_within_1e4(mi):
+    """Clear sky (bruneton2017), sun zenith 60 and 88 (a low sun's finite disk), views from the
+    zenith to 88 deg, towards and away from the sun: |error| < 1e-4."""
+    import skyref.atmosphere as atm
+
+    views = [(0.0, 0.0), (45.0, 180.0), (70.0, 0.0), (80.0, 180.0), (85.0, 90.0), (88.0, 0.0), (88.0, 180.0)]
+    for sun_zenith in (60.0, 88.0):
+        error = single_scattering_error(mi, atm.bruneton2017(), sun_zenith, views)
+        print(f"sun {sun_zenith}: max |error| {np.max(np.abs(error)):.1e}")
+        assert np.all(np.abs(error) < 1e-4), error
+
+
+@pytest.mark.xfail(strict=True, reason="open (issue 14): the panels bound the density's change, not the "
+                   "transmittance's; optically thick horizon rays (hazy: 1-3.5% at view zenith >= 88), "
+                   "the clear horizon (3e-4 at 89.5-89.9 deg) and twilight (up to 6%) need panels in "
+                   "optical depth and at the sun ray's grazing altitudes")
+@pytest.mark.parametrize("case", ["clear_horizon", "hazy_horizon", "twilight"])
+def test_single_scattering_quadrature_hard_cases(mi, case):
+    import skyref.atmosphere as atm
+
+    atmosphere = atm.from_turbidity(6.0) if case == "hazy_horizon" else atm.bruneton2017()
+    sun_zenith = 96.0 if case == "twilight" else 60.0
+    views = [(0.0, 0.0), (80.0, 180.0), (89.5, 180.0), (89.9, 180.0), (89.9, 0.0)]
+    error = single_scattering_error(mi, atmosphere, sun_zenith, views)
+    assert np.all(np.abs(error[np.isfinite(error)]) < 1e-4), error
+
+
+# --- the whole estimator against delta tracking ------------------------------------------------------
+
+
+def test_line_integral_matches_delta_tracking(mi):
+    """Clear sky, sun zenith 60, black-to-0.1 ground, all orders: the two independent estimators
+    agree within |z| < 4 per view and channel, at < 0.25% relative standard error each."""
+    import skyref.atmosphere as atm
+    from skyref.render import build_integrator
+    from skyref.scene import Scene, Sun, direction_from_angles
+
+    views = np.array([direction_from_angles(z, a) for z, a in [(0.0, 0.0), (45.0, 0.0), (70.0, 180.0), (85.0, 90.0)]])
+    line = line_integrator(mi, atm.bruneton2017(), 60.0, max_depth=64)
+    scene = Scene(atmosphere=atm.bruneton2017(), sun=Sun(60.0, 180.0), wavelengths=WL)
+    tracking = build_integrator(scene)
+    estimates = []
+    for integ, spp in ((line, 2000), (tracking, 48_000)):
+        x = integ.render_directions(views, seed=11, spp=spp, batches=16).numpy().sum(axis=2)   # (16, M, N)
+        estimates.append((x.mean(axis=0), x.std(axis=0, ddof=1) / 4.0))
+    (a, se_a), (b, se_b) = estimates
+    z = (a - b) / np.hypot(se_a, se_b)
+    print(f"line integral vs delta tracking: max |z| {np.max(np.abs(z)):.2f}, rel. se "
+          f"{np.max(se_a / a):.2%} / {np.max(se_b / b):.2%}")
+    assert np.all(se_a / a < 2.5e-3) and np.all(se_b / b < 2.5e-3)
+    assert np.all(np.abs(z) < 4.0), z
