@@ -4,7 +4,15 @@ A spectral path tracer for the atmosphere alone, written directly in Dr.Jit (no 
 for the planet: the ground and the top of the atmosphere are analytic spheres, or planes, in an
 observer-centred frame, see :mod:`skyref.plugins.geometry`).
 
-Estimator, per camera sample:
+Two independent estimators (``estimator``): ``delta_tracking``, the default, described below,
+and ``line_integral`` (experimental, :mod:`skyref.plugins.line_integral`): single scattering by
+quadrature along every segment of the path, the sun's optical depth from a table, and forced
+collisions, so that every path scatters; orders >= 2 stay unbiased Monte Carlo. Its quadrature
+is within 1e-4 of a refined one on clear skies up to the horizon, not yet on optically thick
+horizons (hazy: 3e-4) or at twilight (9e-4); see ``results/groundtruth_speed.md`` for its speed.
+Scenes with objects use delta tracking.
+
+The delta-tracking estimator, per camera sample:
 
 * **Wavelengths.** A path carries K channels (indices into the wavelength grid of N values;
   by default K = N, all of them): channel k takes index (j + k floor(N/K)) mod N with j uniform,
@@ -297,7 +305,10 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         for order, contribution in enumerate(orders):
             for k, index in enumerate(indices):
                 slot = ((batch * targets + target) * len(ORDER_NAMES) + order) * n + index
-                dr.scatter_reduce(dr.ReduceOp.Add, image, contribution[k] * scale, slot, valid)
+                # A fixed reduction mode: "Auto" picks one by the buffer's size, and each new
+                # choice compiles the whole path tracer again.
+                dr.scatter_reduce(dr.ReduceOp.Add, image, contribution[k] * scale, slot, valid,
+                                  mode=dr.ReduceMode.Local)
         return image
 
     # --- the path tracer ------------------------------------------------------------------------

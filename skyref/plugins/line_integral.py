@@ -33,6 +33,10 @@ from skyref.plugins.quadrature import NODES_PER_PANEL, GaussLegendreRule, insert
 #: Grey optical thickness above which a panel's nodes are spaced evenly in transmittance.
 PANEL_THICKNESS = 0.05
 
+#: Optical depths (most opaque channel, at the start's extinction) at which a segment gets extra
+#: panel boundaries.
+OPTICAL_DEPTH_BREAKS = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0)
+
 
 class SegmentQuadrature:
     """The quadrature of one segment: its panels [a_i, b_i] and their changes of variable
@@ -61,11 +65,19 @@ class LineIntegral:
 
     # --- the segment's panels ----------------------------------------------------------------
 
-    def _panels(self, p, d, h, length, sun, rising_only):
+    def _panels(self, channels, p, d, h, length, sun, rising_only):
+        """Panel boundaries: the level crossings; where the segment enters and leaves the
+        planet's shadow; and where it has crossed OPTICAL_DEPTH_BREAKS of optical depth in its
+        most opaque channel at the extinction of its start (an optically thick segment, e.g. a
+        horizontal ray through hazy air, loses most of its light within one level panel)."""
         crossings = [self.geometry.level_crossings(p, d, h, level) for level in self.levels]
         breakpoints = ordered_breakpoints(crossings, length, rising_only, xp)
         t_in, t_out = self.geometry.shadow_interval(p, d, length, sun)
         breakpoints = insert_sorted(insert_sorted(breakpoints, t_in, xp), t_out, xp)
+        rho = [c.density(h) for c in self.optics.components]
+        inv_extinction = dr.rcp(dr.maximum(dr.detach(dr.min(channels.optical_depth(rho), axis=0)), 1e-30))
+        for tau in OPTICAL_DEPTH_BREAKS:
+            breakpoints = insert_sorted(breakpoints, dr.minimum(tau * inv_extinction, length), xp)
         panels = list(zip(breakpoints[:-1], breakpoints[1:]))
         lit = [~((0.5 * (a + b) > t_in) & (0.5 * (a + b) < t_out)) for a, b in panels]
         return panels, lit
@@ -85,7 +97,7 @@ class LineIntegral:
         guarantees the segment never descends (a ray leaving the ground)."""
         optics, rule = self.optics, self.rule
         components = optics.components
-        panels, lit = self._panels(p, d, h, length, sun, rising_only)
+        panels, lit = self._panels(channels, p, d, h, length, sun, rising_only)
         cos_scatter = dr.dot(d, sun)
         phase = [None if s is None else c.phase(cos_scatter)
                  for c, (s, _) in zip(components, channels.coefficients)]

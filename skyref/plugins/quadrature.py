@@ -27,8 +27,8 @@ from __future__ import annotations
 
 import numpy as np
 
-#: Nodes per panel of the kernels' rule (see the accuracy tests: the single-scattering integral
-#: and every transmittance to < 1e-4 relative against a 16-node rule on the same panels).
+#: Nodes per panel of the kernels' rule (``tests/test_line_integral.py``: single scattering
+#: within 1e-4 of an 8-node rule on panels split in three, clear sky, zenith to horizon).
 NODES_PER_PANEL = 3
 
 

@@ -6,7 +6,7 @@ differentiable coefficient.
 
 Spherical shell: a table over Bruneton's transmittance parametrisation (Bruneton 2017,
 ``GetTransmittanceTextureUvFromRMu``: x_r = rho / rho_top with rho = sqrt(r^2 - R^2), and x_mu the
-distance to the top between its smallest and largest value), filled in float64 by a 12-node
+distance to the top between its smallest and largest value), filled in float64 by a 6-node
 Gauss–Legendre rule on the panels of :mod:`skyref.plugins.quadrature` (each halved), and read
 with bilinear interpolation. Rays towards the sun that hit the ground are in the planet's shadow:
 their optical depth is not tabulated (the line integral decides shadow geometrically).
@@ -29,9 +29,9 @@ import numpy as np
 from skyref.plugins.drjit_namespace import xp
 from skyref.plugins.quadrature import GaussLegendreRule, level_crossings, ordered_breakpoints, panel_levels
 
-#: Table size (x_r, x_mu). Measured against a direct 12-node quadrature: see
-#: ``tests/test_line_integral.py`` (transmittance error < 1e-5 absolute in optical depth x
-#: extinction on the presets).
+#: Table size (x_r, x_mu). Against the direct quadrature at random points and sun directions
+#: (``tests/test_line_integral.py``), the transmittance at 440 nm differs by at most 3e-5
+#: (bruneton2017) and 6e-5 (turbidity 6).
 TABLE_SIZE = (256, 1024)
 
 #: Gauss–Legendre nodes per half panel when the table is filled.
