@@ -80,8 +80,6 @@ def test_shadow_interval(mi):
     """A ray from 10 km above the night side's terminator through the shadow: points inside
     [t_in, t_out] are behind the planet within its radius of the sun's axis, points outside are
     not (checked in float64)."""
-    import drjit as dr
-
     from skyref.plugins.geometry import SphericalShell
 
     shell = SphericalShell(R, R + 60_000.0, 10_000.0)
