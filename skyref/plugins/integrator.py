@@ -61,7 +61,7 @@ import numpy as np
 
 from skyref.atmosphere import solar_irradiance
 from skyref.plugins.geometry import PlaneParallelSlab, SphericalShell
-from skyref.plugins.line_integral import LineIntegral
+from skyref.plugins.line_integral import LineIntegral, grey_sum
 from skyref.plugins.optics import AtmosphereOptics, atmosphere_from_property, direction_with_cosine
 from skyref.plugins.quadrature import panel_levels
 from skyref.plugins.sun_optical_depth import SunOpticalDepth
@@ -435,8 +435,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
 
         # -- where the path goes on: a forced collision in the air, or the ground --------------------
         air_mass = sum(quadrature.masses, mi.Float(0.0))
-        grey_transmittance = dr.exp(-sum((g * tau for g, tau in zip(grey_t, quadrature.total) if g is not None),
-                                        mi.Float(0.0)))
+        grey_transmittance = dr.exp(-grey_sum(grey_t, quadrature.total))
         ground_mass = dr.select(on_ground, grey_transmittance * grey_albedo, 0.0)
         p_air = air_mass / dr.maximum(air_mass + ground_mass, 1e-30)
         alive &= (air_mass + ground_mass) > 0.0

@@ -30,12 +30,19 @@ import mitsuba as mi
 from skyref.plugins.drjit_namespace import xp
 from skyref.plugins.quadrature import NODES_PER_PANEL, GaussLegendreRule, insert_sorted, ordered_breakpoints
 
-#: Grey optical thickness above which a panel's nodes are spaced evenly in transmittance.
+#: Optical thickness (most transparent channel) above which a panel's nodes are spaced evenly
+#: in that channel's transmittance.
 PANEL_THICKNESS = 0.05
 
-#: Optical depths (most opaque channel, at the start's extinction) at which a segment gets extra
+#: Optical depths (most transparent channel, at the start's extinction) at which a segment gets extra
 #: panel boundaries.
 OPTICAL_DEPTH_BREAKS = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0)
+
+
+def grey_sum(grey, per_constituent):
+    """sum_c grey_c x_c over the constituents whose grey coefficient is not None (a grey
+    coefficient times a unit-density optical depth or density, Float)."""
+    return sum((g * x for g, x in zip(grey, per_constituent) if g is not None), mi.Float(0.0))
 
 
 class SegmentQuadrature:
@@ -68,7 +75,7 @@ class LineIntegral:
     def _panels(self, channels, p, d, h, length, sun, rising_only):
         """Panel boundaries: the level crossings; where the segment enters and leaves the
         planet's shadow; and where it has crossed OPTICAL_DEPTH_BREAKS of optical depth in its
-        most opaque channel at the extinction of its start (an optically thick segment, e.g. a
+        most transparent channel at the extinction of its start (an optically thick segment, e.g. a
         horizontal ray through hazy air, loses most of its light within one level panel)."""
         crossings = [self.geometry.level_crossings(p, d, h, level) for level in self.levels]
         breakpoints = ordered_breakpoints(crossings, length, rising_only, xp)
@@ -131,9 +138,7 @@ class LineIntegral:
                 weight = width * stretch[j][1] * rule.weights[j]
                 sunlight = sunlight + source * dr.exp(-exponent) * dr.select(panel_lit, weight, 0.0)
                 # grey proxy of sigma_s(t) T(0, t), for the forced collision
-                grey_exponent = sum((g * tau[c] for c, g in enumerate(grey_t) if g is not None), mi.Float(0.0))
-                grey_source = sum((g * rho[c] for c, g in enumerate(grey_s) if g is not None), mi.Float(0.0))
-                mass = mass + weight * dr.detach(grey_source * dr.exp(-grey_exponent))
+                mass = mass + weight * dr.detach(grey_sum(grey_s, rho) * dr.exp(-grey_sum(grey_t, tau)))
             masses.append(mass)
             prefix = [prefix[c] + sum(rule.weights[m] * density_du[m][c] for m in range(rule.count))
                       for c in range(len(components))]
