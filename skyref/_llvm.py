@@ -16,7 +16,7 @@ import sys
 
 from skyref.errors import SkyrefSetupError
 
-#: Major versions of libLLVM that crash Dr.Jit 1.5 on these machines (see DESIGN.md).
+#: Major versions of libLLVM that crash Dr.Jit 1.5 on these machines (see docs/design.md).
 BROKEN_MAJOR_VERSIONS = frozenset({15, 16})
 #: Oldest major version known to work.
 MINIMUM_MAJOR_VERSION = 17

@@ -13,6 +13,7 @@ import sys
 import numpy as np
 
 from skyref.errors import ParameterError, SkyrefSetupError
+from skyref.validation import check_int, check_output_directory, check_output_file, safe_file_name
 
 
 def _describe_scene(scene) -> str:
@@ -48,7 +49,7 @@ def cmd_validate(args) -> int:
     from skyref.scene import load_scene
 
     for path in args.scenes:
-        scene = load_scene(path)
+        scene = load_scene(path, report=None if args.quiet else print)
         print(f"{path}: valid")
         if not args.quiet:
             print(_describe_scene(scene))
@@ -76,33 +77,16 @@ def cmd_info(args) -> int:
     return 0
 
 
-def _check_output(path: str, suffix: str, option: str) -> None:
-    """Fail before any work if ``path`` has the wrong extension or its directory cannot be
-    created or written (probed with a temporary file that is removed again)."""
-    import tempfile
-
-    if not path.lower().endswith(suffix):
-        raise ParameterError(option, path, f"a file name ending in {suffix}", "wrong extension")
-    directory = os.path.dirname(os.path.abspath(path))
-    try:
-        os.makedirs(directory, exist_ok=True)
-        with tempfile.TemporaryFile(dir=directory):
-            pass
-    except OSError as exc:
-        raise ParameterError(option, path, "a path in a writable directory",
-                             f"cannot write there ({exc.strerror})") from None
-
-
 def cmd_render(args) -> int:
     from skyref.io.exr import write_sky_exr
     from skyref.io.png import write_png
     from skyref.render import render_sky
     from skyref.scene import load_scene
 
-    _check_output(args.output, ".exr", "--output")
+    check_output_file(args.output, ".exr", "--output")
     if args.png:
-        _check_output(args.png, ".png", "--png")
-    scene = load_scene(args.scene)
+        check_output_file(args.png, ".png", "--png")
+    scene = load_scene(args.scene, report=print)
     sky = render_sky(scene, spp=args.spp, passes=args.passes, seed=args.seed, variant=args.variant,
                      geometry=args.geometry, progress=not args.quiet)
     write_sky_exr(sky, args.output)
@@ -110,10 +94,11 @@ def cmd_render(args) -> int:
         write_png(sky, args.png)
     meta = sky.metadata
     visible = sky.radiance > 0
-    error = float(np.median(sky.standard_error[visible] / sky.radiance[visible])) if visible.any() else float("nan")
+    noise = (f"median relative standard error "
+             f"{100 * float(np.median(sky.standard_error[visible] / sky.radiance[visible])):.1f}%"
+             if visible.any() else "the sky is black (nothing scatters or reflects light towards the camera)")
     print(f"{args.output}: {sky.shape[1]}x{sky.shape[0]} px, {sky.shape[2]} wavelengths, {meta['spp']} spp "
-          f"in {meta['render_time_s']:.1f} s ({meta['samples_per_second'] / 1e6:.2f} M samples/s), "
-          f"median relative standard error {100 * error:.1f}%")
+          f"in {meta['render_time_s']:.1f} s ({meta['samples_per_second'] / 1e6:.2f} M samples/s), {noise}")
     return 0
 
 
@@ -146,10 +131,26 @@ def _option_value(text: str):
         return name.strip(), value
 
 
+def _load_tables(path: str) -> dict:
+    """The arrays of an ``--tables`` .npz file; a ParameterError naming ``--tables`` otherwise."""
+    import zipfile
+
+    if not os.path.isfile(path):
+        raise ParameterError("--tables", path, "an existing .npz file", "file not found")
+    try:
+        with np.load(path, allow_pickle=False) as archive:
+            return dict(archive)
+    except (ValueError, OSError, EOFError, zipfile.BadZipFile, AttributeError):
+        raise ParameterError("--tables", path, "a NumPy .npz archive of tables (numpy.savez)",
+                             "not an .npz archive") from None
+
+
 def cmd_audit(args) -> int:
     from skyref.analytic import MODELS, analytic_model
+    from skyref.analytic import REGISTRY as MODEL_REGISTRY
     from skyref.audit.audit import audit, summary_table, write_report
     from skyref.lut import METHODS, lut_method, method_class
+    from skyref.lut import REGISTRY as LUT_REGISTRY
     from skyref.scene import load_scene
 
     if args.method not in METHODS and args.method not in MODELS:
@@ -158,16 +159,21 @@ def cmd_audit(args) -> int:
         raise ParameterError("--tables", args.tables, "a LUT method (" + ", ".join(METHODS) + ")",
                              f"{args.method} has no tables")
     scene = load_scene(args.scene)
+    directory = args.out or os.path.join("out", "audit", safe_file_name(f"{args.method}-{scene.name}"))
+    check_output_directory(directory, "--out")
     options = dict(_option_value(o) for o in args.option or [])
     if args.tables:
-        arrays = dict(np.load(args.tables))
-        method = method_class(args.method).from_tables(scene.atmosphere, scene.wavelengths_nm, **arrays, **options)
+        arrays = _load_tables(args.tables)
+        from_tables = method_class(args.method).from_tables
+        LUT_REGISTRY.check_options(args.method, arrays, from_tables, "--tables array", required=True)
+        LUT_REGISTRY.check_options(args.method, options, from_tables, "--option")
+        method = from_tables(scene.atmosphere, scene.wavelengths_nm, **arrays, **options)
     elif args.method in MODELS:
+        MODEL_REGISTRY.check_options(args.method, options, parameter="--option")
         method = analytic_model(args.method, scene.atmosphere, scene.wavelengths_nm, **options)
     else:
+        LUT_REGISTRY.check_options(args.method, options, parameter="--option")
         method = lut_method(args.method, scene.atmosphere, scene.wavelengths_nm, **options)
-    directory = args.out or os.path.join("out", "audit", f"{args.method}-{scene.name}")
-    _check_output(os.path.join(directory, "report.md"), ".md", "--out")
     result = audit(method, scene, max_spp=args.max_spp, cache_dir=os.path.join("out", "audit", "ground-truth"),
                    log=(lambda *_: None) if args.quiet else print)
     path = write_report(result, directory)
@@ -200,7 +206,6 @@ def cmd_report(args) -> int:
 def cmd_advise(args) -> int:
     from skyref.audit.advise import advice_lines, load_map, parse_tolerance
     from skyref.scene import load_scene
-    from skyref.atmosphere.validation import check_int
 
     tolerance = parse_tolerance(args.tolerance)
     directions = check_int("--directions", args.directions, 1, 1 << 40)

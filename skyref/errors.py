@@ -5,6 +5,17 @@ value that was given and the range that would have been accepted.
 """
 
 
+#: Longest echo of a value in an error message, characters.
+MAX_ECHO = 200
+
+
+def _shortened(text: str) -> str:
+    """``text`` cut to about MAX_ECHO characters, saying how long it was."""
+    if len(text) <= MAX_ECHO:
+        return text
+    return f"{text[:MAX_ECHO - 40]}... ({len(text):,} characters)"
+
+
 class ParameterError(ValueError):
     """A parameter is out of its valid range (or of the wrong kind).
 
@@ -16,7 +27,7 @@ class ParameterError(ValueError):
         self.value = value
         self.valid = valid
         self.problem = problem
-        super().__init__(f"{name} = {value!r}: {problem} (valid: {valid})")
+        super().__init__(f"{name} = {_shortened(repr(value))}: {problem} (valid: {valid})")
 
 
 class SkyrefSetupError(RuntimeError):

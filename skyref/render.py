@@ -18,9 +18,14 @@ import numpy as np
 from skyref import __version__
 from skyref.errors import ParameterError
 from skyref.sky import ORDER_NAMES, Sky
+from skyref.validation import check_choice
 
 #: Most samples traced at once (bounds memory: ~100 bytes of state per sample and channel).
 MAX_WAVEFRONT = 1 << 21
+
+#: Most values (passes x pixels x scattering orders x wavelengths) one render accumulates: each
+#: takes ~12 bytes across the device buffer and its host copies, so this is ~13 GB.
+MAX_IMAGE_VALUES = 1 << 30
 
 GEOMETRIES = ("spherical", "plane_parallel")
 
@@ -61,6 +66,18 @@ def build_integrator(scene, geometry: str = "spherical", wavelengths_per_path: i
     return integrator
 
 
+def check_image_size(scene, passes: int) -> None:
+    """Refuse, before any work, a render whose per-pass images would exceed MAX_IMAGE_VALUES,
+    saying how large a camera fits and the ways around (tiles, fewer passes or wavelengths)."""
+    camera, wavelengths = scene.camera, len(scene.wavelengths_nm)
+    per_pixel = passes * len(ORDER_NAMES) * wavelengths
+    if camera.width * camera.height * per_pixel > MAX_IMAGE_VALUES:
+        raise ParameterError("camera", f"{camera.width}x{camera.height}",
+                             f"at most {MAX_IMAGE_VALUES // per_pixel:,} pixels at {wavelengths} wavelengths and "
+                             f"{passes} passes", "too large for one render: render it in tiles (cameras "
+                             "covering parts of the view), or with fewer passes or wavelengths")
+
+
 def _chunks(spp: int, pixels: int) -> list[int]:
     """Split ``spp`` samples per pixel (per batch, for all batches at once) into chunks of at
     most MAX_WAVEFRONT samples (``pixels`` counts every batch's)."""
@@ -82,26 +99,31 @@ def render_sky(scene, spp: int | None = None, passes: int | None = None, seed: i
     planet (for comparisons with plane-parallel solvers such as DISORT); ``estimator`` picks
     the integrator's estimator (see :data:`skyref.plugins.integrator.ESTIMATORS`).
     """
-    from skyref.atmosphere.validation import check_choice
     from skyref.plugins import load_mitsuba
     from skyref.projection import pixel_directions
     from skyref.scene import RenderSettings
 
     check_choice("geometry", geometry, GEOMETRIES)
+    scene.check_files()
     settings = RenderSettings(spp=scene.render.spp if spp is None else spp,
                               passes=scene.render.passes if passes is None else passes,
                               seed=scene.render.seed if seed is None else seed,
                               max_depth=scene.render.max_depth, pixel_sampling=scene.render.pixel_sampling)
     if settings.spp < settings.passes:
         raise ParameterError("spp", settings.spp, f">= passes ({settings.passes})", "too few samples")
+    check_image_size(scene, settings.passes)
     spp_per_pass = settings.spp // settings.passes
 
     mi = load_mitsuba(variant)
     integrator = build_integrator(scene.replace(render=settings), geometry, wavelengths_per_path, estimator)
     sensor = mi.load_dict(sensor_dict(scene.camera))
     if scene.objects:
-        integrator.objects = mi.load_dict({"type": "scene", **{f"object_{i}": item.mitsuba_dict()
-                                                               for i, item in enumerate(scene.objects)}})
+        try:
+            integrator.objects = mi.load_dict({"type": "scene", **{f"object_{i}": item.mitsuba_dict()
+                                                                   for i, item in enumerate(scene.objects)}})
+        except RuntimeError as exc:    # an unreadable mesh: Mitsuba's message, first line
+            raise ParameterError("objects", [item.filename or item.type for item in scene.objects],
+                                 "shapes Mitsuba can load", str(exc).strip().splitlines()[0][:200]) from None
     camera = scene.camera
     chunks = _chunks(spp_per_pass, camera.width * camera.height * settings.passes)
 
@@ -112,13 +134,13 @@ def render_sky(scene, spp: int | None = None, passes: int | None = None, seed: i
         bar = tqdm(total=settings.passes * spp_per_pass, unit="spp", desc=f"render {scene.name or 'sky'}")
     start = time.perf_counter()
     per_pass = None
-    for c, chunk_spp in enumerate(chunks):
-        # Distinct (seed, chunk) give distinct sampler seeds (the sampler takes 32 bits); the
-        # batches of one launch are independent lanes of one seed.
-        seed_value = (settings.seed * len(chunks) + c) % (1 << 32)
-        image = integrator.render_orders(sensor, seed=seed_value, spp=chunk_spp,
+    done = 0
+    for chunk_spp in chunks:
+        # Each launch continues the samples' sequences where the one before stopped.
+        image = integrator.render_orders(sensor, seed=settings.seed % (1 << 32), spp=chunk_spp,
                                          pixel_centres=settings.pixel_sampling == "centre",
-                                         batches=settings.passes).numpy()
+                                         batches=settings.passes, sample_offset=done).numpy()
+        done += chunk_spp
         per_pass = image * chunk_spp if per_pass is None else per_pass + image * chunk_spp
         if bar is not None:
             bar.update(chunk_spp * settings.passes)

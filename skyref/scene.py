@@ -15,17 +15,17 @@ import copy
 import dataclasses
 import datetime as _dt
 import math
+import os
 import tomllib
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from skyref.atmosphere import Atmosphere, from_turbidity, preset, wavelength_grid
-from skyref.atmosphere.validation import check_array, check_choice, check_fields, check_number
+from skyref.atmosphere.sun import SUN_ANGULAR_RADIUS_DEG, SunDisk
+from skyref.validation import check_array, check_choice, check_fields, check_number
 from skyref.errors import ParameterError
 
-#: Bruneton 2017's solar angular radius, 0.00935 / 2 rad, in degrees.
-SUN_ANGULAR_RADIUS_DEG = math.degrees(0.00935 / 2.0)
 
 
 def direction_from_angles(zenith_deg, azimuth_deg) -> np.ndarray:
@@ -56,9 +56,14 @@ class Sun:
     def __post_init__(self):
         check_number("sun.zenith_deg", self.zenith_deg, 0.0, 180.0)
         check_number("sun.azimuth_deg", self.azimuth_deg, -360.0, 720.0)
-        check_number("sun.angular_radius_deg", self.angular_radius_deg, 0.0, 10.0, lo_open=True)
         if not isinstance(self.limb_darkening, bool):
             raise ParameterError("sun.limb_darkening", self.limb_darkening, "true or false", "not a boolean")
+        SunDisk(self.angular_radius_deg, self.limb_darkening)      # checks the angular radius
+
+    @property
+    def disk(self) -> SunDisk:
+        """The solar disk (angular radius, limb darkening) of :mod:`skyref.atmosphere.sun`."""
+        return SunDisk(self.angular_radius_deg, self.limb_darkening)
 
     @classmethod
     def at(cls, time, latitude_deg: float, longitude_deg: float, altitude_m: float = 0.0, **kwargs) -> "Sun":
@@ -253,6 +258,14 @@ class SceneObject:
         return cls(**check_fields("objects", dict(data), cls))
 
 
+#: Longest scene name, characters (it goes into file names and image headers).
+MAX_NAME_LENGTH = 200
+
+#: Most wavelengths one scene renders (each is a channel of every path: ~100 bytes of state per
+#: sample and channel).
+MAX_WAVELENGTHS = 1000
+
+
 @dataclass(frozen=True)
 class Scene:
     atmosphere: Atmosphere = field(default_factory=lambda: preset("bruneton2017"))
@@ -265,10 +278,20 @@ class Scene:
     objects: tuple = ()
 
     def __post_init__(self):
+        if not isinstance(self.name, str) or len(self.name) > MAX_NAME_LENGTH:
+            raise ParameterError("name", self.name, f"a string of at most {MAX_NAME_LENGTH} characters",
+                                 "too long or not a string")
         spec = self.wavelengths
         if isinstance(spec, (list, tuple, np.ndarray)):
+            if len(spec) > MAX_WAVELENGTHS:
+                raise ParameterError("spectral.wavelengths", f"{len(spec):,} wavelengths",
+                                     f"at most {MAX_WAVELENGTHS}", "too many for one render: split the spectrum")
             spec = tuple(float(x) for x in spec)
         object.__setattr__(self, "wavelengths", spec)
+        if len(self.wavelengths_nm) > MAX_WAVELENGTHS:
+            raise ParameterError("spectral.wavelengths", f"{len(self.wavelengths_nm):,} wavelengths",
+                                 f"at most {MAX_WAVELENGTHS}", "too many for one render: a coarser step, or "
+                                 "split the spectrum into several scenes")
         object.__setattr__(self, "objects", tuple(self.objects))
         for item in self.objects:
             if not isinstance(item, SceneObject):
@@ -281,6 +304,15 @@ class Scene:
 
     def replace(self, **changes) -> "Scene":
         return dataclasses.replace(self, **changes)
+
+    def check_files(self) -> None:
+        """Raise a ParameterError if an object's mesh file does not exist (paths are relative to
+        the working directory, as Mitsuba reads them). Called before a render starts, not when a
+        scene is built: a scene read back from an image header stays readable elsewhere."""
+        for i, item in enumerate(self.objects):
+            if item.filename and not os.path.isfile(item.filename):
+                raise ParameterError(f"objects[{i}].filename", item.filename, "an existing .obj or .ply file",
+                                     "file not found")
 
     def to_dict(self) -> dict:
         wavelengths = list(self.wavelengths) if isinstance(self.wavelengths, tuple) else self.wavelengths
@@ -336,6 +368,10 @@ def atmosphere_from_scene_dict(data: dict) -> Atmosphere:
     fields = dict(data)
     name = fields.pop("preset", None)
     turbidity = fields.pop("turbidity", None)
+    if name is None and "constituents" not in fields:
+        raise ParameterError("atmosphere", sorted(data), 'a preset (e.g. preset = "bruneton2017"), or a '
+                             "[atmosphere.constituents] table (an empty one for a vacuum)",
+                             "neither: the atmosphere would be empty")
     merged = _merge(preset(name).to_dict(), fields) if name is not None else fields
     constituents = merged.get("constituents", {})
     merged["constituents"] = {k: v for k, v in constituents.items() if v is not False}
@@ -345,18 +381,39 @@ def atmosphere_from_scene_dict(data: dict) -> Atmosphere:
     return atmosphere
 
 
-def load_scene(path) -> Scene:
-    """Read a scene TOML file; errors name the file and the offending entry."""
+def defaulted_tables(scene: Scene, data: dict) -> str:
+    """What a scene file left to the defaults, in words ("" if it set every table): an empty
+    or name-only file is a whole default scene, and the user should be told which."""
+    defaults = {"atmosphere": f"the {scene.atmosphere.name or 'default'} preset",
+                "sun": f"sun at zenith {scene.sun.zenith_deg:g} deg, azimuth {scene.sun.azimuth_deg:g} deg",
+                "observer": f"observer at {scene.observer.altitude_m:g} m",
+                "camera": f"{scene.camera.type} camera {scene.camera.width}x{scene.camera.height}",
+                "spectral": f"{len(scene.wavelengths_nm)} wavelengths ({scene.wavelengths})",
+                "render": f"{scene.render.spp} spp in {scene.render.passes} passes"}
+    missing = [f"no [{table}]: {text}" for table, text in defaults.items() if table not in data]
+    return "defaults used: " + "; ".join(missing) if missing else ""
+
+
+def load_scene(path, report=None) -> Scene:
+    """Read a scene TOML file; errors name the file and the offending entry. ``report``, if
+    given, is called with a line saying which tables the file left to the defaults."""
     try:
         with open(path, "rb") as f:
             data = tomllib.load(f)
     except FileNotFoundError:
         raise ParameterError("scene", str(path), "an existing TOML file", "file not found") from None
+    except IsADirectoryError:
+        raise ParameterError("scene", str(path), "an existing TOML file", "a directory") from None
+    except UnicodeDecodeError:
+        raise ParameterError("scene", str(path), "a UTF-8 TOML text file", "not text (binary?)") from None
     except tomllib.TOMLDecodeError as exc:
         raise ParameterError("scene", str(path), "valid TOML", f"TOML syntax error: {exc}") from None
     scene = Scene.from_dict(data)
+    scene.check_files()
     if not scene.name:
         scene = scene.replace(name=str(path).rsplit("/", 1)[-1].removesuffix(".toml"))
+    if report is not None and defaulted_tables(scene, data):
+        report(f"{path}: {defaulted_tables(scene, data)}")
     return scene
 
 

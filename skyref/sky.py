@@ -15,6 +15,11 @@ import numpy as np
 #: scattered once, twice, and three or more times (a ground reflection counts as a scattering).
 ORDER_NAMES = ("sun_direct", "single", "double", "higher")
 
+#: Metadata that differ between runs of the same render (timings): shown to the user, kept in
+#: batch markers and manifests, never written into data files, so that the same seed gives the
+#: same bytes.
+TIMING_METADATA = ("render_time_s", "samples_per_second")
+
 
 @dataclass
 class Sky:

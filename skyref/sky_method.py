@@ -11,9 +11,11 @@ in the observer's east-north-up frame, without the solar disk.
 from __future__ import annotations
 
 import importlib
+import inspect
 import time
 
-from skyref.atmosphere.validation import check_choice, check_view
+from skyref.validation import check_choice, check_view
+from skyref.errors import ParameterError
 
 
 class Registry:
@@ -29,10 +31,31 @@ class Registry:
         module, cls = self.entries[check_choice(self.parameter, name, tuple(self.entries))]
         return getattr(importlib.import_module(module), cls)
 
+    def check_options(self, name: str, options, factory=None, parameter: str = "option",
+                      required: bool = False) -> None:
+        """Raise a ParameterError naming ``parameter`` if a name in ``options`` is not a keyword
+        of the method's constructor (or of ``factory``, e.g. its ``from_tables``), listing the
+        valid ones; with ``required``, also if one without a default is missing."""
+        signature = inspect.signature(factory or self.cls(name))
+        keywords = [p for p in signature.parameters.values()
+                    if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)][2:]   # after atmosphere, wavelengths
+        accepted = [p.name for p in keywords]
+        if not any(p.kind is p.VAR_KEYWORD for p in signature.parameters.values()):
+            for option in options:
+                if option not in accepted:
+                    raise ParameterError(parameter, option, ", ".join(accepted) or "none",
+                                         f"not a parameter of {name}")
+        if required:
+            for p in keywords:
+                if p.default is p.empty and p.name not in options:
+                    raise ParameterError(parameter, sorted(options), f"all of {', '.join(accepted)} "
+                                         "without a default", f"{p.name!r} missing")
+
     def build(self, name: str, atmosphere, wavelengths_nm="rgb", **options):
         """The method ``name`` for ``atmosphere``, not yet precomputed; ``options`` are its own
         (resolutions, orders, precision, ...) and are added to its ``options`` attribute, beside
         the settings it records itself, for reports."""
+        self.check_options(name, options)
         method = self.cls(name)(atmosphere, wavelengths_nm, **options)
         method.options = {**getattr(method, "options", {}), **options}
         return method
@@ -63,7 +86,7 @@ class SkyMethod:
 
     def _checked_view(self, directions, sun_direction, observer_altitude_m: float) -> tuple:
         """(directions (M, 3), sun (3,), altitude m) validated by
-        :func:`~skyref.atmosphere.validation.check_view`, once the tables exist."""
+        :func:`~skyref.validation.check_view`, once the tables exist."""
         if self.precompute_seconds is None:
             raise RuntimeError(f"{self.name}: call precompute() before radiance()")
         return check_view(directions, sun_direction, observer_altitude_m)

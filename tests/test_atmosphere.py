@@ -17,7 +17,7 @@ from skyref.atmosphere.phase import (cornette_shanks_asymmetry, cornette_shanks_
                                      henyey_greenstein_phase, rayleigh_phase)
 
 # --- independent reference model of the Bruneton 2017 atmosphere -----------------------------
-# Everything below is written from the published numbers (DESIGN.md, Bruneton 2017), not from
+# Everything below is written from the published numbers (docs/design.md, Bruneton 2017), not from
 # skyref's code.
 
 R_BOTTOM = 6_360_000.0

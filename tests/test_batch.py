@@ -145,8 +145,13 @@ def test_kill_9_then_resume_equals_an_uninterrupted_run(tmp_path):
     killed_data = xr.open_zarr(os.path.join(killed_dir, "dataset.zarr")).load()
     clean_data = xr.open_zarr(os.path.join(clean_dir, "dataset.zarr")).load()
     for i in range(8):
-        a = read_sky_exr(os.path.join(killed_dir, "skies", f"sky-{i}.exr"))
-        b = read_sky_exr(os.path.join(clean_dir, "skies", f"sky-{i}.exr"))
+        # the same bytes (no timings in data files), so the same SHA-256 in the markers
+        exr_a, exr_b = (os.path.join(d, "skies", f"sky-{i}.exr") for d in (killed_dir, clean_dir))
+        assert open(exr_a, "rb").read() == open(exr_b, "rb").read(), f"sky-{i}.exr differs"
+        markers = [json.load(open(os.path.join(d, "markers", f"sky-{i}.json"))) for d in (killed_dir, clean_dir)]
+        assert markers[0]["exr_sha256"] == markers[1]["exr_sha256"]
+        a = read_sky_exr(exr_a)
+        b = read_sky_exr(exr_b)
         np.testing.assert_array_equal(a.radiance, b.radiance)
         np.testing.assert_array_equal(a.standard_error, b.standard_error)
         zenith, albedo = divmod(i, 2)

@@ -178,3 +178,48 @@ def test_png_preview(tmp_path):
     assert np.all(np.array(Image.open(tmp_path / "grey.png")) == 188)
     with pytest.raises(ParameterError):
         write_png(np.ones((2, 3)), tmp_path / "bad.png")
+
+
+# --- wavelengths survive the channel names exactly --------------------------------------------
+
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+from skyref.io.exr import channel_name  # noqa: E402
+
+# skyref's default grid ends at 830 nm, read back as 830.0000000000001 before channel names were
+# parsed as exact decimals (outside the ozone data, so `skyref invert` refused its own render).
+GRID_WAVELENGTHS = st.floats(min_value=360.0, max_value=830.0, allow_nan=False)
+
+
+@given(st.floats(min_value=1.0, max_value=1.0e6, allow_nan=False))
+def test_a_channel_name_reads_back_as_its_decimal(wavelength):
+    """A name keeps 6 decimals: it reads back as exactly the float nearest that decimal."""
+    from skyref.io.exr import _CHANNEL, _channel_wavelength_nm
+
+    name = channel_name(wavelength)
+    assert _channel_wavelength_nm(_CHANNEL.match(name)) == float(f"{wavelength:.6f}")
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(GRID_WAVELENGTHS, min_size=1, max_size=6, unique_by=lambda w: f"{w:.6f}"),
+       st.sampled_from([None, 0.1, 1.0, 10.0]))
+def test_any_grid_survives_the_round_trip_exactly(tmp_path_factory, wavelengths, step):
+    """Any grid — arbitrary floats, or a start/stop/step grid whose values are not short
+    decimals — comes back as exactly the scene's wavelengths (from the header), in its order."""
+    if step is not None:
+        start = min(wavelengths)
+        grid = {"start_nm": start, "stop_nm": min(start + 5 * step, 830.0), "step_nm": step}
+    else:
+        grid = list(wavelengths)
+    scene = Scene(camera=Camera("equirectangular", width=2, height=1), wavelengths=grid, name="grid")
+    exact = scene.wavelengths_nm
+    radiance = np.arange(2 * exact.size, dtype=np.float32).reshape(1, 2, exact.size)
+    sky = Sky(radiance=radiance, standard_error=radiance * 0.01, wavelengths_nm=exact,
+              directions=np.zeros((1, 2, 3)), orders={}, scene=scene, metadata={})
+    path = tmp_path_factory.mktemp("grid") / "sky.exr"
+    write_sky_exr(sky, path)
+    back = read_sky_exr(path)
+    assert back.wavelengths_nm.tolist() == exact.tolist()
+    assert np.array_equal(back.radiance, radiance)
+    scene.atmosphere.check_wavelengths(back.wavelengths_nm)     # within every spectrum's data

@@ -248,7 +248,7 @@ passes = 2
                                                atmosphere_turbidity(scene.atmosphere), scene.atmosphere.ground_albedo.value)
         store.write_region(index, {"radiance": radiance.astype(np.float32),
                                    "standard_error": (0.01 * radiance).astype(np.float32),
-                                   "spp": np.float32(8), "render_time_s": np.float32(0), "relative_error_p95": np.float32(0.01)})
+                                   "spp": np.float32(8), "relative_error_p95": np.float32(0.01)})
     return tmp_path / "batch"
 
 
@@ -348,3 +348,17 @@ def test_interpolation_gap_finds_coefficients_that_do_not_blend():
     assert gap["albedo"]["median"] == pytest.approx(1.0 / 3.0, rel=1e-6)
     # Turbidity neighbours still agree, as in the published table (a few % where skies differ most).
     assert gap["turbidity"]["p95"] < 0.05 and interpolation_gap(published)["turbidity"]["p95"] < 0.05
+
+
+@pytest.mark.parametrize("argv, name", [(["--kinds", "bogus"], "--kinds"), (["--out", "{file}/out"], "--out")])
+def test_cli_refusals_leave_no_output_directory(tmp_path, argv, name):
+    """An unknown kind or an unwritable --out is refused before anything is created."""
+    batch = synthetic_batch(tmp_path, published_table(), [3.0], [0.0], [40.0], wavelengths=[440.0])
+    (tmp_path / "file").write_text("")
+    argv = [a.replace("{file}", str(tmp_path / "file")) for a in argv]
+    if "--out" not in argv:
+        argv += ["--out", str(tmp_path / "coefficients")]
+    with pytest.raises(ParameterError) as info:
+        run_cli(["--grid", str(batch), *argv, "-q"])
+    assert info.value.name == name
+    assert not (tmp_path / "coefficients").exists() and not (tmp_path / "file" / "out").exists()

@@ -231,3 +231,39 @@ def test_extreme_constituents(mi, case, sun_zenith):
         # (Rayleigh x100 under a low sun: the light reaches the ground by diffusion through
         # tau ~ 27, ~10^3 scatterings, beyond max_depth 64: the sky may truncate to 0 there.)
         assert np.all(out[:, 1:, :].sum(axis=1)[d[:, 2] > 0.0] > 0.0)
+
+
+# --- a haze of optical depth 50 seen from 1000 km at sunset -------------------------------------------
+
+def test_thick_haze_from_space_costs_what_an_easy_sky_costs_and_agrees_with_the_line_integral(mi):
+    """Aerosol optical depth ~50 (Angstrom beta 50), observer at 1000 km, sun zenith 89.9: rays
+    come down 60 km through thin air onto a haze 1.2 km thick. With a majorant taken at the
+    lowest point of the whole segment (the haze's), delta tracking took ~3 ms per sample (a
+    16x8 image at 64 spp and 48 wavelengths: 363 s); with one majorant per descent of a scale
+    height it costs at most 30x a clear day-time sky per sample (CPU time, same run; measured
+    ~8x), and agrees with the independent line-integral estimator (|z| < 4 at 0.5-5% precision)."""
+    import dataclasses
+    import time
+
+    from skyref.render import build_integrator
+    from skyref.scene import Observer, Scene, Sun
+
+    thick = bruneton().with_constituent(dataclasses.replace(bruneton()["aerosol"], angstrom_beta=50.0))
+    views = direction(*np.array([(180.0, 0.0), (170.0, 180.0), (160.0, 0.0), (150.0, 180.0), (148.0, 90.0)]).T)
+
+    def cpu_and_radiance(atmosphere, sun_zenith, observer_m, estimator, spp):
+        scene = Scene(atmosphere=atmosphere, sun=Sun(sun_zenith, 180.0), observer=Observer(observer_m), wavelengths=WL)
+        integ = build_integrator(scene, estimator=estimator)
+        integ.render_directions(views, seed=1, spp=16, batches=16)          # compile
+        start = time.process_time()
+        x = integ.render_directions(views, seed=2, spp=spp, batches=16).numpy().sum(axis=2)   # (16, M, N)
+        return time.process_time() - start, x.mean(axis=0), x.std(axis=0, ddof=1) / 4.0
+
+    easy, _, _ = cpu_and_radiance(bruneton(), 45.0, 1.0, "delta_tracking", 8192)
+    hard, tracked, se_tracked = cpu_and_radiance(thick, 89.9, 1.0e6, "delta_tracking", 8192)
+    _, line, se_line = cpu_and_radiance(thick, 89.9, 1.0e6, "line_integral", 2048)
+    print(f"thick haze from space: {hard / easy:.1f}x the CPU time of a clear sky per sample")
+    assert hard < 30.0 * easy
+    z = (tracked - line) / np.hypot(se_tracked, se_line)
+    assert np.all(se_tracked / tracked < 0.03) and np.all(se_line / line < 0.05)
+    assert np.all(np.abs(z) < 4.0), z

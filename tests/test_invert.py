@@ -5,8 +5,10 @@ Tiny images and budgets keep the file under two minutes on two CPU cores; result
 (benchmarks/inversion.py) measures bias, spread and coverage over many cases.
 """
 
+import dataclasses
 import json
 import math
+import os
 
 import numpy as np
 import pytest
@@ -289,3 +291,25 @@ def test_cli_end_to_end(truth_sky, tmp_path, capsys):
     document = json.loads((tmp_path / "fit" / "result.json").read_text())
     assert document["channels"] == "xyz" and document["sun"]["zenith_deg"] == pytest.approx(40.0)
     assert document["estimates"]["ground_albedo"]["value"] == 0.3
+
+
+def test_skyrefs_own_default_render_inverts(mi, tmp_path, capsys):
+    """The default scene (scenes/earth-clear.toml: 48 wavelengths 360-830 nm), rendered by
+    ``skyref render`` (a smaller camera, fewer samples) and given to ``skyref invert``: the
+    wavelengths come back exactly from the EXR (830.0, not 830.0000000000001, which is outside
+    the ozone data) and the fit runs."""
+    from skyref.cli import main
+    from skyref.io.exr import read_sky_exr
+    from skyref.scene import load_scene, save_scene
+
+    scene = load_scene(os.path.join(os.path.dirname(__file__), "..", "scenes", "earth-clear.toml"))
+    small = tmp_path / "earth-clear.toml"
+    save_scene(scene.replace(camera=dataclasses.replace(scene.camera, width=32, height=16)), small)
+    assert main(["render", str(small), "-o", str(tmp_path / "sky.exr"), "--spp", "32", "--variant", VARIANT, "-q"]) == 0
+    assert read_sky_exr(tmp_path / "sky.exr").wavelengths_nm.tolist() == scene.wavelengths_nm.tolist()
+    status = main(["invert", str(tmp_path / "sky.exr"), "-o", str(tmp_path / "fit"), "--free", "aod_550",
+                   "--channels", "rgb", "--pixels", "64", "--spp", "16", "--max-spp", "32", "--final-spp", "64",
+                   "--iterations", "2", "--map-spp", "4", "--variant", VARIANT, "-q"])
+    out = capsys.readouterr().out
+    assert status == 0, out
+    assert json.loads((tmp_path / "fit" / "result.json").read_text())["estimates"]["aod_550"]["value"] > 0.0

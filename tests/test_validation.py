@@ -347,7 +347,7 @@ def test_missing_and_malformed_scene_file(tmp_path):
 
 
 def test_integer_checks_name_the_entry():
-    from skyref.atmosphere.validation import check_int, check_int_tuple
+    from skyref.validation import check_int, check_int_tuple
     from skyref.errors import ParameterError
 
     assert check_int("n", 4, 2, 8, even=True) == 4
@@ -363,7 +363,7 @@ def test_integer_checks_name_the_entry():
 
 
 def test_view_arguments_are_checked_and_normalised():
-    from skyref.atmosphere.validation import check_view
+    from skyref.validation import check_view
     from skyref.errors import ParameterError
 
     dirs, sun, altitude = check_view([[0.0, 0.0, 1.0]], [0.0, 3.0, 4.0], 10)

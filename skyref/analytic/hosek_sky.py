@@ -23,7 +23,7 @@ import numpy as np
 from skyref.analytic.base import AnalyticModel
 from skyref.analytic.hosek import BAND_CENTRES_NM, TURBIDITIES, published_table
 from skyref.atmosphere import turbidity as atmosphere_turbidity
-from skyref.atmosphere.validation import check_number
+from skyref.validation import check_number
 from skyref.errors import ParameterError
 
 #: Wavelength at which the atmosphere's ground albedo is read, nm.

@@ -46,7 +46,7 @@ import numpy as np
 from skyref.analytic.base import (AnalyticModel, altitude_along_ray, atmosphere_segment,
                                   column_along_rays, components, hits_ground, per_component,
                                   phase_values, radius_along_ray, sphere_distances, sun_cosine_along_ray)
-from skyref.atmosphere.validation import check_number
+from skyref.validation import check_number
 
 #: Work per chunk of view rays (samples x wavelengths x rays), to bound memory.
 CHUNK_ELEMENTS = 1 << 21

@@ -53,7 +53,7 @@ from skyref.analytic.base import (AnalyticModel, altitude_along_ray, atmosphere_
                                   column_along_rays, exponential_components, per_component,
                                   phase_values, sphere_distances, sun_cosine_along_ray,
                                   zenith_cosine_along_ray)
-from skyref.atmosphere.validation import check_choice, check_number
+from skyref.validation import check_choice, check_number
 from skyref.errors import ParameterError
 
 #: O'Neil's fitted coefficients c0..c4 of log(scale / H) in x = 1 - cos theta.

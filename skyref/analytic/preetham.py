@@ -55,7 +55,7 @@ import numpy as np
 from skyref.analytic.base import AnalyticModel
 from skyref.analytic.hosek import perez_f
 from skyref.atmosphere.presets import turbidity as atmosphere_turbidity
-from skyref.atmosphere.validation import check_number
+from skyref.validation import check_number
 from skyref.color import xyz_matrix
 from skyref.errors import ParameterError
 

@@ -23,7 +23,7 @@ from skyref.atmosphere.profiles import (DensityProfile, ExponentialProfile,
                                         PiecewiseLinearProfile, profile_from_dict)
 from skyref.atmosphere.spectra import (DOBSON_UNIT_PER_M2, PowerLawSpectrum, Spectrum,
                                        as_spectrum, ozone_cross_section, power_law)
-from skyref.atmosphere.validation import check_choice, check_number
+from skyref.validation import check_choice, check_number
 from skyref.errors import ParameterError
 
 #: Rayleigh scattering coefficient of sea-level air at 1 um (Bruneton 2017), m^-1; it scales

@@ -15,7 +15,7 @@ import numpy as np
 
 from skyref.atmosphere.constituents import Constituent, constituent_from_dict
 from skyref.atmosphere.spectra import Spectrum, as_spectrum
-from skyref.atmosphere.validation import check_number
+from skyref.validation import check_number
 from skyref.errors import ParameterError
 
 #: Accepted planet radii, m (a 1 km asteroid up to a gas-giant-sized body).

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from skyref.atmosphere.validation import check_array, check_number
+from skyref.validation import check_array, check_number
 from skyref.errors import ParameterError
 
 INV_4PI = 1.0 / (4.0 * math.pi)
@@ -155,7 +155,7 @@ PHASE_TYPES = {cls.kind: cls for cls in (RayleighPhase, CornetteShanks, HenyeyGr
 
 
 def phase_from_dict(data: dict) -> PhaseFunction:
-    from skyref.atmosphere.validation import check_choice, check_fields
+    from skyref.validation import check_choice, check_fields
 
     fields = dict(data)
     kind = check_choice("phase.type", fields.pop("type", None), tuple(PHASE_TYPES))

@@ -1,6 +1,6 @@
 """Named atmospheres, each with the source of its numbers.
 
-All presets share the conventions of DESIGN.md: planet radius 6360 km, Rayleigh
+All presets share the conventions of docs/design.md: planet radius 6360 km, Rayleigh
 1.24062e-6 m^-1 (lambda / 1 um)^-4 with an 8 km scale height, aerosol with a 1.2 km scale
 height, ozone as a 10–25–40 km tent.
 """
@@ -10,7 +10,7 @@ from __future__ import annotations
 from skyref.atmosphere.constituents import Absorber, Aerosol, Rayleigh
 from skyref.atmosphere.model import Atmosphere
 from skyref.atmosphere.phase import CornetteShanks
-from skyref.atmosphere.validation import check_choice, check_number
+from skyref.validation import check_choice, check_number
 
 #: Reference wavelength of turbidity, nm.
 TURBIDITY_WAVELENGTH_NM = 550.0

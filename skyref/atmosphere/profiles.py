@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from skyref.atmosphere.validation import check_array, check_number
+from skyref.validation import check_array, check_number
 from skyref.errors import ParameterError
 
 #: Largest altitude any profile accepts, m (well above any atmosphere top we model).
@@ -210,7 +210,7 @@ PROFILE_TYPES = {cls.kind: cls for cls in (ExponentialProfile, PiecewiseLinearPr
 
 def profile_from_dict(data: dict) -> DensityProfile:
     """Inverse of ``DensityProfile.to_dict``."""
-    from skyref.atmosphere.validation import check_choice, check_fields
+    from skyref.validation import check_choice, check_fields
 
     fields = dict(data)
     kind = check_choice("profile.type", fields.pop("type", None), tuple(PROFILE_TYPES))

@@ -14,7 +14,7 @@ from importlib import resources
 
 import numpy as np
 
-from skyref.atmosphere.validation import check_array, check_fields, check_number
+from skyref.validation import check_array, check_fields, check_number
 from skyref.errors import ParameterError
 
 #: Molecules per m^2 in one Dobson unit (0.01 mm of pure gas at 273.15 K and 1 atm).
@@ -29,6 +29,9 @@ LUMINANCE_WAVELENGTHS_NM = tuple(float(w) for w in range(380, 790, 10))
 
 #: Widest wavelength range any skyref spectrum is defined on (ASTM G173's), nm.
 WAVELENGTH_LIMITS_NM = (280.0, 4000.0)
+
+#: Most wavelengths a grid may describe (a scene renders at most ``skyref.scene.MAX_WAVELENGTHS``).
+MAX_GRID_WAVELENGTHS = 100_000
 
 
 class Spectrum:
@@ -212,5 +215,9 @@ def wavelength_grid(spec) -> np.ndarray:
         start = check_number("start_nm", spec.get("start_nm"), *WAVELENGTH_LIMITS_NM)
         stop = check_number("stop_nm", spec.get("stop_nm"), start, WAVELENGTH_LIMITS_NM[1])
         step = check_number("step_nm", spec.get("step_nm"), 0.0, math.inf, lo_open=True)
+        count = math.floor((stop - start) / step + 1e-6) + 1
+        if count > MAX_GRID_WAVELENGTHS:
+            raise ParameterError("step_nm", step, f">= {(stop - start) / (MAX_GRID_WAVELENGTHS - 1):.3g} nm "
+                                 f"(at most {MAX_GRID_WAVELENGTHS:,} wavelengths)", f"gives {count:,} wavelengths")
         return np.arange(start, stop + step * 1e-6, step)
     return check_array("wavelengths", spec, *WAVELENGTH_LIMITS_NM)

@@ -77,14 +77,32 @@ def rank(summaries: list[dict], kind: str, tolerance: float, directions: int = F
     return meeting, others
 
 
+#: What :func:`rank` and :func:`advice_lines` read of each entry of a map.
+ENTRY_KEYS = ("method", "label", "kinds", "precompute_s", "per_view_s", "lookup_s")
+
+
 def load_map(path: str) -> list[dict]:
-    """The entry summaries of a map written by ``skyref report``."""
+    """The entry summaries of a map written by ``skyref report``; a ParameterError naming
+    ``--map`` for a missing, unreadable or malformed file."""
+    valid = "a map.json written by 'skyref report'"
     try:
-        with open(path) as f:
-            return json.load(f)["entries"]
+        with open(path, encoding="utf-8") as f:
+            document = json.load(f)
     except FileNotFoundError:
-        raise ParameterError("--map", path, "a map.json written by 'skyref report'", "not found; run "
-                             "'skyref report' first") from None
+        raise ParameterError("--map", path, valid, "not found; run 'skyref report' first") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ParameterError("--map", path, valid, f"unreadable: {exc}") from None
+    except json.JSONDecodeError as exc:
+        raise ParameterError("--map", path, valid, f"not JSON (line {exc.lineno}, column {exc.colno}: "
+                             f"{exc.msg})") from None
+    entries = document.get("entries") if isinstance(document, dict) else None
+    if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
+        raise ParameterError("--map", path, valid, "no list of 'entries'")
+    for i, entry in enumerate(entries):
+        missing = [key for key in ENTRY_KEYS if key not in entry]
+        if missing or not isinstance(entry["kinds"], dict):
+            raise ParameterError("--map", path, valid, f"entry {i} lacks {', '.join(missing) or 'a kinds table'}")
+    return entries
 
 
 def _cost_text(c: dict, directions: int, frames: int) -> str:

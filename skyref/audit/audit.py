@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from skyref.atmosphere.validation import check_number
+from skyref.validation import check_number
 from skyref.audit.groundtruth import ground_truth
 from skyref.audit.metrics import (DYNAMIC_RANGE, MAX_PIXEL_NOISE, METRICS, NOISE_RATIO, STATISTICS, error_maps,
                                   region_statistics)

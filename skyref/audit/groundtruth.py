@@ -9,6 +9,7 @@ import json
 import os
 
 from skyref.render import render_to_error
+from skyref.validation import safe_file_name
 
 #: Most rendering rounds per ground truth.
 ROUNDS = 8
@@ -20,6 +21,13 @@ def cache_key(scene, target_relative_error: float, max_spp: int) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:20]
 
 
+def cache_path(cache_dir: str, scene, target_relative_error: float, max_spp: int) -> str:
+    """Where the ground truth of ``scene`` is cached: inside ``cache_dir`` whatever the scene's
+    name (made a safe file name), keyed by the scene's content and the sample budget."""
+    name = f"{safe_file_name(scene.name or 'scene')}-{cache_key(scene, target_relative_error, max_spp)}"
+    return os.path.join(cache_dir, f"{name}.exr")
+
+
 def ground_truth(scene, target_relative_error: float, max_spp: int, cache_dir: str | None = None,
                  variant: str | None = None):
     """The scene's sky with the 95th percentile of standard error / radiance at most
@@ -29,7 +37,7 @@ def ground_truth(scene, target_relative_error: float, max_spp: int, cache_dir: s
 
     path = None
     if cache_dir is not None:
-        path = os.path.join(cache_dir, f"{scene.name or 'scene'}-{cache_key(scene, target_relative_error, max_spp)}.exr")
+        path = cache_path(cache_dir, scene, target_relative_error, max_spp)
         if os.path.exists(path):
             return read_sky_exr(path)
     seeds = [scene.render.seed * ROUNDS + r for r in range(ROUNDS)]

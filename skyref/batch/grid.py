@@ -47,7 +47,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from skyref.atmosphere.validation import check_choice, check_fields, check_int, check_number
+from skyref.validation import check_choice, check_fields, check_int, check_number
 from skyref.errors import ParameterError
 
 FORMATS = ("spectral", "rgb")
@@ -58,6 +58,12 @@ AXIS_TABLES = ("sun", "observer", "atmosphere")
 MAX_SPP_LIMIT = 1 << 20
 #: Most rendering rounds of one sky (a target-error render).
 MAX_ROUNDS = 8
+
+#: Largest grid, skies, and longest axis, values: beyond them the grid's own bookkeeping (the
+#: dataset's coordinates, the validation of every axis value) costs minutes and gigabytes
+#: before the first sky. Split a larger sweep into several grids.
+MAX_SKIES = 100_000
+MAX_AXIS_VALUES = 10_000
 
 
 @dataclass(frozen=True)
@@ -137,10 +143,17 @@ class Grid:
                                      + ", ".join(AXIS_TABLES), "not a sweepable entry")
             if not isinstance(values, list) or not values:
                 raise ParameterError(f"axes.{path}", values, "a non-empty list of values", "empty or not a list")
+            if len(values) > MAX_AXIS_VALUES:
+                raise ParameterError(f"axes.{path}", f"{len(values):,} values", f"at most {MAX_AXIS_VALUES:,} values",
+                                     "too many: split the sweep into several grids")
             if any(isinstance(v, list) for v in values):
                 raise ParameterError(f"axes.{path}", values, "a list of numbers, strings or tables", "nested lists")
             if len({json.dumps(v, sort_keys=True) for v in values}) != len(values):
                 raise ParameterError(f"axes.{path}", values, "distinct values", "repeated value")
+        if len(self) > MAX_SKIES:
+            raise ParameterError("axes", " x ".join(f"{len(v):,}" for v in self.axes.values()) + f" = {len(self):,} skies",
+                                 f"at most {MAX_SKIES:,} skies", "too many: split the sweep into several grids "
+                                 "(e.g. one per value of an axis)")
 
     # --- the skies --------------------------------------------------------------------------
 
@@ -194,11 +207,14 @@ class Grid:
         """Build the base scene, the scene of every axis value (the other axes as in the base)
         and the scenes of the grid's corners; raise :class:`ParameterError` naming the base,
         the axis or the combination at fault. Returns the scene of sky 0."""
+        from skyref.render import check_image_size
         from skyref.scene import Scene
 
         def build(coordinates, name, value):
             try:
-                return Scene.from_dict(self.scene_dict(coordinates))
+                scene = Scene.from_dict(self.scene_dict(coordinates))
+                check_image_size(scene, self.output.passes)
+                return scene
             except ParameterError as exc:
                 raise ParameterError(name, value, exc.valid,
                                      f"gives {exc.name} = {exc.value!r}: {exc.problem}") from None
@@ -229,6 +245,10 @@ def load_grid(path) -> Grid:
             data = tomllib.load(f)
     except FileNotFoundError:
         raise ParameterError("grid", path, "an existing TOML file", "file not found") from None
+    except IsADirectoryError:
+        raise ParameterError("grid", path, "an existing TOML file", "a directory") from None
+    except UnicodeDecodeError:
+        raise ParameterError("grid", path, "a UTF-8 TOML text file", "not text (binary?)") from None
     except tomllib.TOMLDecodeError as exc:
         raise ParameterError("grid", path, "valid TOML", f"TOML syntax error: {exc}") from None
     for key in data:

@@ -25,18 +25,44 @@ def make_task(grid: Grid, spec, variant, drjit_threads) -> dict:
             "max_rounds": MAX_ROUNDS}
 
 
+#: Seconds to wait for a dask scheduler named by ``--scheduler`` to answer.
+SCHEDULER_TIMEOUT_S = 10
+
+
+def check_workers(workers: int | None) -> int:
+    """The local worker processes: ``workers``, or one per two cores (at least one) if None."""
+    cores = os.cpu_count() or 1
+    if workers is None:
+        return max(1, cores // 2)
+    if isinstance(workers, bool) or not isinstance(workers, int) or not 1 <= workers <= cores:
+        raise ParameterError("workers", workers, f"an integer in [1, {cores}] (this machine's cores)", "invalid")
+    return workers
+
+
 def local_cluster(workers: int | None):
     """A LocalCluster of ``workers`` single-threaded processes (default: one per two cores,
     at least one) sharing this machine's memory; returns (cluster, Dr.Jit threads per worker)."""
     from dask.distributed import LocalCluster
 
-    cores = os.cpu_count() or 1
-    workers = workers or max(1, cores // 2)
-    if not 1 <= workers <= cores:
-        raise ParameterError("workers", workers, f"an integer in [1, {cores}] (this machine's cores)", "invalid")
+    workers = check_workers(workers)
     cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
                            silence_logs=logging.ERROR)
-    return cluster, max(1, cores // workers)
+    return cluster, max(1, (os.cpu_count() or 1) // workers)
+
+
+def connect(scheduler: str):
+    """A client of the dask scheduler at ``scheduler``; a ParameterError if none answers within
+    SCHEDULER_TIMEOUT_S seconds or the address is malformed."""
+    from dask.distributed import Client
+
+    valid = "the address of a running dask scheduler, e.g. tcp://host:8786"
+    try:
+        return Client(scheduler, timeout=SCHEDULER_TIMEOUT_S)
+    except (OSError, TimeoutError) as exc:
+        raise ParameterError("scheduler", scheduler, valid,
+                             f"no scheduler answered within {SCHEDULER_TIMEOUT_S} s ({type(exc).__name__})") from None
+    except (ValueError, TypeError) as exc:
+        raise ParameterError("scheduler", scheduler, valid, f"not an address ({exc})") from None
 
 
 def run_batch(grid: Grid, scheduler: str | None = None, workers: int | None = None, variant: str | None = None,
@@ -44,13 +70,34 @@ def run_batch(grid: Grid, scheduler: str | None = None, workers: int | None = No
     """Render every unfinished sky of ``grid``; returns the manifest (see
     :class:`skyref.batch.store.BatchStore`) plus ``failed`` (sky id -> error message) and
     ``wall_time_s``."""
-    from dask.distributed import Client, as_completed
+    from dask.distributed import Client
 
+    # Everything is checked, and the scheduler reached, before anything is written.
     first_scene = grid.validate()
-    store = BatchStore(grid)
-    store.check_writable()
     if workers is not None and scheduler is not None:
         raise ParameterError("workers", workers, "only without --scheduler (the cluster sizes itself)", "conflict")
+    if scheduler is None:
+        check_workers(workers)
+    store = BatchStore(grid)
+    store.check_writable()
+    cluster = None
+    if scheduler is None:
+        cluster, threads = local_cluster(workers)
+        client = Client(cluster)
+    else:
+        client, threads = connect(scheduler), None
+    try:
+        return _run(grid, store, first_scene, client, threads, variant, verify, progress, log)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def _run(grid, store, first_scene, client, threads, variant, verify, progress, log) -> dict:
+    """The body of :func:`run_batch`, once the cluster is up."""
+    from dask.distributed import as_completed
+
     with store.lock():
         store.prepare(first_scene)
         pending_indices = [i for i in range(len(grid)) if not store.is_finished(grid.sky_id(i), verify)]
@@ -60,12 +107,6 @@ def run_batch(grid: Grid, scheduler: str | None = None, workers: int | None = No
             f"{done_before} already finished, output {store.directory}")
         start = time.perf_counter()
         failed = {}
-        cluster = None
-        if scheduler is None:
-            cluster, threads = local_cluster(workers)
-            client = Client(cluster)
-        else:
-            client, threads = Client(scheduler), None
         bar = None
         if progress:
             from tqdm import tqdm
@@ -99,9 +140,6 @@ def run_batch(grid: Grid, scheduler: str | None = None, workers: int | None = No
         finally:
             if bar is not None:
                 bar.close()
-            client.close()
-            if cluster is not None:
-                cluster.close()
         manifest = store.write_manifest()
     manifest.update(failed=failed, wall_time_s=time.perf_counter() - start)
     return manifest

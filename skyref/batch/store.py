@@ -6,6 +6,8 @@
     <directory>/skies/<id>.exr       one spectral EXR per sky (skyref.io.exr layout)
     <directory>/markers/<id>.json    completion marker: written last, atomically, with the EXR's
                                      SHA-256 and size, the sky's parameters, samples and timings
+                                     (the only place timings are kept: EXRs and the dataset hold
+                                     data alone, so a rerun writes the same bytes)
     <directory>/dataset.zarr         every sky in one xarray dataset (axes as dimensions)
     <directory>/manifest.json        the markers gathered, rewritten at the end of each run
 
@@ -31,6 +33,7 @@ import numpy as np
 
 from skyref.errors import ParameterError
 from skyref.io.atomic import atomic_write
+from skyref.validation import check_output_directory
 
 DATASET = "dataset.zarr"
 
@@ -60,20 +63,15 @@ class BatchStore:
     # --- opening ----------------------------------------------------------------------------
 
     def check_writable(self):
-        """Fail before any work if the directory cannot be created and written."""
-        import tempfile
-
-        try:
-            os.makedirs(self.directory, exist_ok=True)
-            with tempfile.TemporaryFile(dir=self.directory):
-                pass
-        except OSError as exc:
-            raise ParameterError("output.directory", self.directory, "a writable directory",
-                                 f"cannot write there ({exc.strerror})") from None
+        """Fail before any work if the directory cannot be created and written (nothing is
+        created yet)."""
+        check_output_directory(self.directory, "output.directory")
 
     @contextlib.contextmanager
     def lock(self):
-        """Hold the directory's lock for a run (released by the OS even on ``kill -9``)."""
+        """Hold the directory's lock for a run (released by the OS even on ``kill -9``); the
+        directory is created here."""
+        os.makedirs(self.directory, exist_ok=True)
         with open(os.path.join(self.directory, ".lock"), "w") as handle:
             try:
                 fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -123,8 +121,7 @@ class BatchStore:
         variables = {name: (axes + list(pixel_dims),
                             da.full(shape + pixel_shape, np.nan, dtype=np.float32, chunks=ones + pixel_shape),
                             {"units": unit}) for name, unit in image_vars.items()}
-        for name, dtype, unit in (("spp", np.float32, "samples per pixel"), ("render_time_s", np.float32, "s"),
-                                  ("relative_error_p95", np.float32, "1")):
+        for name, dtype, unit in (("spp", np.float32, "samples per pixel"), ("relative_error_p95", np.float32, "1")):
             variables[name] = (axes, da.full(shape, np.nan, dtype=dtype, chunks=ones), {"units": unit})
         coords = {path: (path, grid.labels(path)) for path in grid.axes}
         if grid.output.format == "spectral":

@@ -48,7 +48,6 @@ def render_and_store(task: dict) -> dict:
     else:
         images = {"rgb": sky.rgb().astype(np.float32)}
     store.write_region(spec.index, dict(images, spp=np.float32(meta["spp"]),
-                                        render_time_s=np.float32(meta["render_time_s"]),
                                         relative_error_p95=np.float32(meta["relative_error_p95"])))
     marker = {"sky_id": spec.sky_id, "index": spec.index, "coordinates": spec.coordinates,
               "exr": os.path.relpath(exr_path, store.directory), "exr_sha256": sha256_of(exr_path),

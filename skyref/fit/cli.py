@@ -12,9 +12,9 @@ import os
 
 import numpy as np
 
-from skyref.atmosphere.validation import check_number
 from skyref.errors import ParameterError
 from skyref.fit.fitter import PRIOR_WEIGHT
+from skyref.validation import check_number, check_output_directory
 
 KINDS = ("spectral", "xyz", "rgb")
 FORM_NAMES = {"hosek": "Hosek-Wilkie", "perez": "Perez (Preetham-style baseline)"}
@@ -128,7 +128,7 @@ def _fit(args, training_sets) -> int:
 
     if not args.out:
         raise ParameterError("--out", None, "a directory for the fitted tables", "missing (or give --evaluate)")
-    os.makedirs(args.out, exist_ok=True)
+    check_output_directory(args.out, "--out")     # created by the first table written
     kinds = _kinds(args.kinds, list(training_sets))
     progress = _progress(args.quiet)
     written = []

@@ -56,7 +56,7 @@ import numpy as np
 
 from skyref.analytic.hosek import (ALBEDOS, CONTROL_POINTS, FORMS, TURBIDITIES, CoefficientTable,
                                    bezier_weights, elevation_parameter, published_table)
-from skyref.atmosphere.validation import check_number
+from skyref.validation import check_number
 from skyref.errors import ParameterError
 from skyref.fit import forms
 

@@ -31,7 +31,7 @@ import numpy as np
 
 from skyref.analytic.hosek import BAND_CENTRES_NM, CHANNELS
 from skyref.errors import ParameterError
-from skyref.scene import SUN_ANGULAR_RADIUS_DEG
+from skyref.atmosphere.sun import SUN_ANGULAR_RADIUS_DEG
 
 #: Directions within this many solar angular radii of the sun's centre are left out of fits and
 #: error statistics: the solar disk is not part of the sky model.

@@ -11,9 +11,8 @@ Writes fit/result.json, convergence.png, residuals.png, fitted.exr and residual.
 
 from __future__ import annotations
 
-import os
-
 from skyref.errors import ParameterError
+from skyref.validation import check_output_directory
 
 
 def add_invert_parser(subparsers):
@@ -120,13 +119,12 @@ def _camera(args):
 def cmd_invert(args) -> int:
     """Run ``skyref invert`` (see the module's documentation)."""
     from skyref.atmosphere import preset
-    from skyref.cli import _check_output
     from skyref.invert import (InversionSettings, ParameterSet, invert, observation, read_exclusion_mask,
                                read_image, sun_from_arguments)
     from skyref.scene import Observer
 
     # Everything is checked before the first render.
-    _check_output(os.path.join(args.out, "result.json"), ".json", "--out")
+    check_output_directory(args.out, "--out")
     atmosphere = preset(args.atmosphere)
     parameters = ParameterSet(atmosphere, free=[n.strip() for n in args.free.split(",") if n.strip()],
                               values=_assignments("--set", args.set, float),

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from skyref.atmosphere.validation import check_array, check_choice, check_int, check_number
+from skyref.validation import check_array, check_choice, check_int, check_number
 from skyref.errors import ParameterError
 from skyref.scene import Camera, Observer, Sun
 
@@ -56,6 +56,10 @@ LDR_SATURATED = 254
 SUN_CONTRAST = 50.0
 
 
+#: Smallest image side, pixels: fewer cannot sample the sky's gradients from the sun to the horizon.
+MIN_IMAGE_SIDE = 8
+
+
 @dataclass
 class SkyImage:
     """Pixel values as read: ``values`` (H, W, C) linear, spectral radiance (``kind`` "spectral",
@@ -69,6 +73,12 @@ class SkyImage:
     saturated: np.ndarray | None = None
     scene: object = None
     source: str = ""
+
+    def __post_init__(self):
+        height, width = self.values.shape[:2]
+        if min(height, width) < MIN_IMAGE_SIDE:
+            raise ParameterError("image", self.source or f"{width}x{height} pixels",
+                                 f"at least {MIN_IMAGE_SIDE}x{MIN_IMAGE_SIDE} pixels", f"{width}x{height} pixels")
 
     @property
     def shape(self) -> tuple:
@@ -143,9 +153,13 @@ def _read_ldr(path) -> SkyImage:
 
     try:
         with Image.open(path) as im:
+            bands = im.getbands()
             pixels = np.asarray(im.convert("RGB"), dtype=np.uint8)
     except OSError as exc:
         raise ParameterError("image", path, "a readable PNG or JPEG", f"unreadable: {exc}") from None
+    if len(bands) < 3:
+        raise ParameterError("image", path, "a colour (RGB) image", "greyscale: the sky's colour is what tells "
+                             "aerosol from brightness; give a colour image (or a spectral EXR)")
     linear = np.asarray(colour.cctf_decoding(pixels / 255.0, function="sRGB"), dtype=np.float64)
     return SkyImage(linear, "rgb", ldr=True, saturated=(pixels >= LDR_SATURATED).any(axis=-1), source=path)
 

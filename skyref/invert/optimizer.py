@@ -62,7 +62,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from skyref.atmosphere.validation import check_int, check_number
+from skyref.validation import check_int, check_number
 from skyref.errors import ParameterError
 from skyref.invert.model import stream_seed
 

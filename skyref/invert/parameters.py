@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from skyref.atmosphere.presets import TURBIDITY_WAVELENGTH_NM
-from skyref.atmosphere.validation import check_choice, check_number
+from skyref.validation import check_choice, check_number
 from skyref.errors import ParameterError
 
 #: tau_550 = beta (550 nm / 1 um)^-alpha.

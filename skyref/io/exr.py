@@ -16,7 +16,8 @@ Channels (all 32-bit FLOAT, ZIP-compressed, lossless):
 Header: ``spectralLayoutVersion = "1.0"`` and ``emissiveUnits = "W.m^-2.sr^-1"`` as the layout
 requires (the only emissive unit it defines; the values are spectral radiance per nm, which
 ``skyref.radianceUnits = "W.m^-2.sr^-1.nm^-1"`` states explicitly), ``skyref.scene`` (the scene
-as TOML, when the sky has one) and ``skyref.metadata`` (JSON of ``sky.metadata``).
+as TOML, when the sky has one) and ``skyref.metadata`` (JSON of ``sky.metadata`` but its
+timings, :data:`skyref.sky.TIMING_METADATA`: the same render gives the same bytes).
 """
 
 from __future__ import annotations
@@ -26,13 +27,14 @@ import math
 import os
 import re
 import tomllib
+from decimal import Decimal
 
 import numpy as np
 
 from skyref.errors import ParameterError
 from skyref.io.atomic import atomic_path
 from skyref.io.json_numpy import numpy_default
-from skyref.sky import ORDER_NAMES, Sky
+from skyref.sky import ORDER_NAMES, TIMING_METADATA, Sky
 
 SPECTRAL_LAYOUT_VERSION = "1.0"
 EMISSIVE_UNITS = "W.m^-2.sr^-1"
@@ -41,10 +43,12 @@ STDERR_LAYER = "stderr"
 
 #: An emissive channel of the layout: Stokes component, number (comma decimal separator,
 #: optional exponent), optional SI prefix, unit (m or Hz).
-_CHANNEL = re.compile(r"^(?:(?P<layer>[^.]+)\.)?S(?P<stokes>[0-3])\.(?P<number>\d*,?\d*(?:[Ee][+-]?\d+)?)"
+_CHANNEL = re.compile(r"^(?:(?P<layer>[^.]+)\.)?S(?P<stokes>[0-3])\."
+                      r"(?P<number>(?:\d+,?\d*|,\d+)(?:[Ee][+-]?\d+)?)"
                       r"(?P<prefix>Y|Z|E|P|T|G|M|k|h|da|d|c|m|u|n|p)?(?P<unit>m|Hz)$")
-_PREFIX = {"Y": 1e24, "Z": 1e21, "E": 1e18, "P": 1e15, "T": 1e12, "G": 1e9, "M": 1e6, "k": 1e3,
-           "h": 1e2, "da": 1e1, "": 1.0, "d": 1e-1, "c": 1e-2, "m": 1e-3, "u": 1e-6, "n": 1e-9, "p": 1e-12}
+#: SI prefixes as powers of ten.
+_PREFIX_EXPONENT = {"Y": 24, "Z": 21, "E": 18, "P": 15, "T": 12, "G": 9, "M": 6, "k": 3, "h": 2, "da": 1,
+                    "": 0, "d": -1, "c": -2, "m": -3, "u": -6, "n": -9, "p": -12}
 _SPEED_OF_LIGHT = 299_792_458.0
 
 
@@ -55,8 +59,14 @@ def channel_name(wavelength_nm: float, layer: str = "") -> str:
 
 
 def _channel_wavelength_nm(match) -> float:
-    value = float(match["number"].replace(",", ".")) * _PREFIX[match["prefix"] or ""]
-    return value * 1e9 if match["unit"] == "m" else _SPEED_OF_LIGHT / value * 1e9
+    """The wavelength (nm) of a channel name, read as an exact decimal: ``830,000000nm`` is
+    830.0, not 830 x 1e-9 x 1e9 = 830.0000000000001. A frequency (Hz) becomes c / f."""
+    number = Decimal(match["number"].replace(",", "."))
+    exponent = _PREFIX_EXPONENT[match["prefix"] or ""]
+    if match["unit"] == "m":
+        return float(number.scaleb(exponent + 9))
+    frequency = float(number.scaleb(exponent))
+    return _SPEED_OF_LIGHT / frequency * 1e9 if frequency > 0.0 else math.inf
 
 
 def _check_layer(name: str, array, shape) -> np.ndarray:
@@ -100,7 +110,8 @@ def write_sky_exr(sky: Sky, path) -> None:
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage,
               "spectralLayoutVersion": SPECTRAL_LAYOUT_VERSION, "emissiveUnits": EMISSIVE_UNITS,
               "skyref.radianceUnits": RADIANCE_UNITS,
-              "skyref.metadata": json.dumps(sky.metadata, default=numpy_default, sort_keys=True)}
+              "skyref.metadata": json.dumps({k: v for k, v in sky.metadata.items() if k not in TIMING_METADATA},
+                                            default=numpy_default, sort_keys=True)}
     if sky.scene is not None:
         header["skyref.scene"] = tomli_w.dumps(sky.scene.to_dict())
     with atomic_path(path) as tmp, OpenEXR.File(header, channels) as exr:
@@ -146,19 +157,24 @@ def read_sky_exr(path) -> Sky:
             scene = Scene.from_dict(tomllib.loads(str(header["skyref.scene"])))
         except tomllib.TOMLDecodeError as exc:
             raise ParameterError("path", path, "a valid skyref.scene TOML attribute", f"TOML error: {exc}") from None
-    wavelengths = np.array(sorted(layers[""]))
+    # The channels in ascending wavelength, or, when the scene in the header names exactly the
+    # file's channels, in the scene's order and with the scene's exact wavelengths (a name keeps
+    # 6 decimals).
+    keys = sorted(layers[""])
+    wavelengths = np.array(keys)
     if scene is not None:
-        scene_wavelengths = np.round(scene.wavelengths_nm, 6)
-        if sorted(scene_wavelengths.tolist()) == sorted(np.round(wavelengths, 6).tolist()):
-            lookup = {round(w, 6): w for w in wavelengths}
-            wavelengths = np.array([lookup[w] for w in scene_wavelengths.tolist()])
+        by_name = {channel_name(w): w for w in keys}
+        exact = [float(w) for w in scene.wavelengths_nm]
+        if sorted(channel_name(w) for w in exact) == sorted(by_name):
+            keys = [by_name[channel_name(w)] for w in exact]
+            wavelengths = np.array(exact)
 
     def stack(layer):
         names = layers[layer]
-        if set(names) != set(wavelengths):
+        if set(names) != set(keys):
             raise ParameterError("path", path, "the same wavelengths in every layer",
                                  f"layer {layer!r} has {sorted(names)}")
-        return np.stack([pixels[names[w]] for w in wavelengths], axis=-1)
+        return np.stack([pixels[names[k]] for k in keys], axis=-1)
 
     radiance = stack("")
     standard_error = stack(STDERR_LAYER) if STDERR_LAYER in layers else np.full_like(radiance, np.nan)

@@ -21,10 +21,10 @@ import drjit as dr
 import numpy as np
 
 from skyref.atmosphere.spectra import solar_irradiance, wavelength_grid
-from skyref.atmosphere.validation import check_choice, check_number
+from skyref.validation import check_choice, check_number
 from skyref.errors import ParameterError
 from skyref.lut.table import PRECISIONS
-from skyref.scene import SUN_ANGULAR_RADIUS_DEG
+from skyref.atmosphere.sun import SUN_ANGULAR_RADIUS_DEG
 from skyref.sky_method import SkyMethod
 
 

@@ -84,13 +84,13 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from skyref.atmosphere.validation import check_choice, check_int, check_number
+from skyref.validation import check_choice, check_int, check_number
 from skyref.errors import ParameterError
 from skyref.lut import planet
 from skyref.lut.base import LutMethod
 from skyref.lut.table import PRECISIONS, Table, texture_coordinate, unit_range
 from skyref.lut.transmittance import TransmittanceTable
-from skyref.scene import SUN_ANGULAR_RADIUS_DEG
+from skyref.atmosphere.sun import SUN_ANGULAR_RADIUS_DEG
 
 
 #: The scattering density is stored per kilometre (W m^-2 sr^-1 nm^-1 km^-1), as in Bruneton's

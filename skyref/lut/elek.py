@@ -100,13 +100,13 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from skyref.atmosphere.validation import check_choice, check_int, check_int_tuple
+from skyref.validation import check_choice, check_int, check_int_tuple
 from skyref.errors import ParameterError
 from skyref.lut import planet
 from skyref.lut.base import LutMethod
 from skyref.lut.table import Table, texture_coordinate, unit_range
 from skyref.lut.transmittance import TransmittanceTable
-from skyref.scene import SUN_ANGULAR_RADIUS_DEG
+from skyref.atmosphere.sun import SUN_ANGULAR_RADIUS_DEG
 
 VIEW_EXPONENT = 0.2            # horizon-split view mapping (Yusov 2013, Bodare–Sandberg 2014)
 SUN_MU_MIN = -0.1975           # sun-zenith mapping constants (Bruneton 2008)

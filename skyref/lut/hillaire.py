@@ -82,13 +82,13 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from skyref.atmosphere.validation import check_array, check_int, check_int_tuple, check_number
+from skyref.validation import check_array, check_int, check_int_tuple, check_number
 from skyref.errors import ParameterError
 from skyref.lut import planet
 from skyref.lut.base import LutMethod
 from skyref.lut.table import Table, texture_coordinate, unit_range
 from skyref.lut.transmittance import TransmittanceTable
-from skyref.scene import SUN_ANGULAR_RADIUS_DEG
+from skyref.atmosphere.sun import SUN_ANGULAR_RADIUS_DEG
 
 #: Isotropic phase function, sr^-1.
 ISOTROPIC_PHASE = 1.0 / (4.0 * math.pi)

@@ -16,7 +16,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from skyref.atmosphere.validation import check_choice
+from skyref.validation import check_choice
 
 PRECISIONS = ("float32", "float16")
 

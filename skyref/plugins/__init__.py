@@ -28,7 +28,7 @@ def load_mitsuba(variant: str | None = None):
     configure_libllvm()
     import mitsuba as mi
 
-    from skyref.atmosphere.validation import check_choice
+    from skyref.validation import check_choice
 
     import drjit as dr
 

@@ -16,6 +16,7 @@ class DrJitNamespace:
     acos = staticmethod(dr.acos)
     minimum = staticmethod(dr.minimum)
     maximum = staticmethod(dr.maximum)
+    clip = staticmethod(dr.clip)
     where = staticmethod(dr.select)
 
 

@@ -10,7 +10,7 @@ Two geometries share one interface:
 - :class:`SphericalShell`: ground sphere of radius R, top of the atmosphere at R + H;
 - :class:`PlaneParallelSlab`: flat ground and top (the geometry of DISORT), for validation.
 
-Float32 notes (measured, DESIGN.md): the naive altitude |p - c| - R errs by ~0.8 m and
+Float32 notes (measured, docs/design.md): the naive altitude |p - c| - R errs by ~0.8 m and
 misclassifies grazing rays, and naive sphere intersection self-intersects at the ground. Here
 the altitude is h = (|p|^2 + 2 (R + h0) p_z + h0 (2R + h0)) / (|p - c| + R), with the constant
 term from float64; sphere intersections use C = r^2 - rho^2 factored as (h - s)(2R + h + s)

@@ -7,9 +7,12 @@ observer-centred frame, see :mod:`skyref.plugins.geometry`).
 Two independent estimators (``estimator``): ``delta_tracking``, the default, described below,
 and ``line_integral`` (experimental, :mod:`skyref.plugins.line_integral`): single scattering by
 quadrature along every segment of the path, the sun's optical depth from a table, and forced
-collisions, so that every path scatters; orders >= 2 stay unbiased Monte Carlo. Its quadrature
-is within 1e-4 of a refined one on clear skies up to the horizon, not yet on optically thick
-horizons (hazy: 3e-4) or at twilight (9e-4); see ``results/groundtruth_speed.md`` for its speed.
+collisions, so that every path scatters; orders >= 2 stay unbiased Monte Carlo, drawn from
+scrambled Sobol points (:mod:`skyref.plugins.sobol`), with a sun lobe among the scattering
+directions where there is aerosol. For a fixed camera direction the camera segment's light is
+traced apart, once per few paths. Its quadrature is within 1e-4 of a refined one on clear skies
+up to the horizon, not yet on optically thick horizons (hazy: 3e-4) or at twilight (9e-4); see
+``results/groundtruth_speed.md`` for its speed and ``docs/design.md`` for why it is built so.
 Scenes with objects use delta tracking.
 
 The delta-tracking estimator, per camera sample:
@@ -18,9 +21,11 @@ The delta-tracking estimator, per camera sample:
   by default K = N, all of them): channel k takes index (j + k floor(N/K)) mod N with j uniform,
   so every wavelength is carried with probability K/N and the image estimate divides by that.
 * **Free flights: spectral tracking** (Kutz et al. 2017) against a *grey* majorant (the largest
-  extinction over the channels; per-channel majorants bias and inflate variance, DESIGN.md).
-  The majorant is the extinction at the lowest point of the remaining segment, regenerated after
-  every tentative collision, so it follows the density as the ray climbs. At a tentative
+  extinction over the channels; per-channel majorants bias and inflate variance, docs/design.md).
+  The majorant is the extinction at the lowest point of the next stretch of the segment (as far
+  as the ray descends by the smallest scale height), regenerated after every tentative collision
+  and at the end of every stretch, so it follows the density as the ray climbs or comes down
+  from high up. At a tentative
   collision the event is real scattering with probability P_s = M_s / (M_s + M_n), with M_s and
   M_n the largest w sigma_s and w (mu - sigma_t) over the channels (history-aware "max"
   probabilities, w the path throughput), and null otherwise; the throughput is multiplied by
@@ -59,18 +64,18 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from skyref.atmosphere import solar_irradiance
 from skyref.plugins.geometry import PlaneParallelSlab, SphericalShell
 from skyref.plugins.line_integral import LineIntegral, grey_sum
-from skyref.plugins.optics import AtmosphereOptics, atmosphere_from_property, direction_with_cosine
+from skyref.atmosphere.phase import henyey_greenstein_phase
+from skyref.atmosphere.sun import SUN_ANGULAR_RADIUS_DEG, SunDisk
+from skyref.plugins.drjit_namespace import xp
+from skyref.plugins.optics import (AtmosphereOptics, atmosphere_from_property, direction_with_cosine,
+                                   sample_henyey_greenstein_cosine)
 from skyref.plugins.quadrature import panel_levels
+from skyref.plugins.sobol import ScrambledSobolSampler, hash_combine
 from skyref.plugins.sun_optical_depth import SunOpticalDepth
-from skyref.scene import SUN_ANGULAR_RADIUS_DEG, direction_from_angles
+from skyref.scene import direction_from_angles
 from skyref.sky import ORDER_NAMES
-
-#: Limb-darkening coefficient u of the linear law I(mu)/I(1) = 1 - u (1 - mu), grey (a visible
-#: band average; Neckel & Labs 1994 give 0.5–0.7 across 450–700 nm).
-LIMB_DARKENING_U = 0.6
 
 #: Majorants are inflated by this factor so that float32 rounding of an altitude can never push
 #: the local extinction above them (any upper bound keeps delta tracking unbiased).
@@ -105,34 +110,37 @@ DEFAULT_ESTIMATOR = "delta_tracking"
 LINE_ROULETTE_DEPTH = 2
 LINE_ROULETTE_THROUGHPUT = 0.1
 
+#: Probability with which a line-integral path scatters into the sun lobe in an atmosphere whose
+#: scattering is all aerosol (scaled by the aerosols' share; measured on the hazy sky, turbidity 6,
+#: sun zenith 60: 0.25 cut the variance of double scattering 10x, of 3+ orders 1.4x).
+SUN_LOBE_PROBABILITY = 0.3
+
+#: Offset between the seed of a render's paths and that of its single-scattering launch.
+SINGLE_SCATTERING_SEED = 0x9E3779B9
+
+#: Paths per sample of the camera segment's light when the camera direction is fixed (only the
+#: point in the sun's disk varies): the single-scattering launch costs at most ~1/8 more.
+PATHS_PER_SINGLE_SCATTERING_SAMPLE = 8
+
 
 class SunLight:
-    """The sun as a disk of angular radius ``angular_radius_rad`` around ``direction`` (unit,
-    towards the sun) delivering ``irradiance`` (W m^-2 nm^-1 per grid wavelength, perpendicular to
-    the beam at the top of the atmosphere)."""
+    """The solar disk (:class:`~skyref.atmosphere.sun.SunDisk`) around ``direction`` (unit,
+    towards the sun) in kernels: its irradiance per grid wavelength (W m^-2 nm^-1) and the
+    sampling of directions inside it."""
 
-    def __init__(self, direction, angular_radius_rad, irradiance, limb_darkening=False):
+    def __init__(self, direction, disk: SunDisk, wavelengths_nm):
         # Opaque: skies that differ only in the sun's position share compiled kernels.
         self.direction = mi.Vector3f(*[dr.opaque(mi.Float, float(x)) for x in direction])
-        self.cos_radius = float(math.cos(angular_radius_rad))
-        self.solid_angle = 2.0 * math.pi * (1.0 - self.cos_radius)
-        self.irradiance = mi.Float(np.asarray(irradiance, np.float32))
-        self.limb_darkening = bool(limb_darkening)
+        self.disk = disk
+        self.cos_radius = disk.cos_radius
+        self.solid_angle = disk.solid_angle_sr
+        self.irradiance = mi.Float(np.asarray(disk.irradiance(wavelengths_nm), np.float32))
         self.frame = mi.Frame3f(self.direction)
 
     def radiance_factor(self, cos_angle):
         """Radiance of the disk at angle acos(cos_angle) from its centre, divided by its mean
         (1 everywhere without limb darkening); 0 outside the disk."""
-        return dr.select(cos_angle >= self.cos_radius, self._limb_darkening(cos_angle), 0.0)
-
-    def _limb_darkening(self, cos_angle):
-        """Linear limb-darkening law in mu = cos of the emission angle on the solar surface,
-        normalised by its disk mean 1 - u/3; 1 when limb darkening is off."""
-        if not self.limb_darkening:
-            return mi.Float(1.0)
-        sin_ratio2 = dr.clip((1.0 - cos_angle * cos_angle) / (1.0 - self.cos_radius ** 2), 0.0, 1.0)
-        mu = dr.safe_sqrt(1.0 - sin_ratio2)
-        return (1.0 - LIMB_DARKENING_U * (1.0 - mu)) / (1.0 - LIMB_DARKENING_U / 3.0)
+        return self.disk.radiance_factor(cos_angle, xp)
 
     def channel_irradiance(self, indices):
         return mi.ArrayXf([dr.gather(mi.Float, self.irradiance, i) for i in indices])
@@ -143,7 +151,7 @@ class SunLight:
         local = mi.warp.square_to_uniform_cone(u, self.cos_radius)
         # No inside test here: in float32, cos(radius) ~ 1 - 1e-5 is resolved to ~1/180 of the
         # cone, and a sampled direction must never be rejected by rounding.
-        return self.frame.to_world(local), self._limb_darkening(local.z)
+        return self.frame.to_world(local), self.disk.limb_darkening_factor(local.z, xp)
 
 
 class AtmosphereIntegrator(mi.SamplingIntegrator):
@@ -181,7 +189,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
                   sun_angular_radius_deg, limb_darkening=False, observer_altitude_m=0.0,
                   geometry="spherical", max_depth=64, wavelengths_per_path=0, estimator=DEFAULT_ESTIMATOR):
         """Set the atmosphere, wavelength grid (nm), sun, observer and estimator settings."""
-        from skyref.atmosphere.validation import check_choice, check_number
+        from skyref.validation import check_choice, check_number
 
         check_choice("geometry", geometry, ("spherical", "plane_parallel"))
         self.estimator = check_choice("estimator", estimator, ESTIMATORS)
@@ -201,8 +209,12 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         else:
             self.geometry = PlaneParallelSlab(atmosphere.thickness_m, h0)
         self.sun = SunLight(direction_from_angles(sun_zenith_deg, sun_azimuth_deg),
-                            math.radians(sun_angular_radius_deg), solar_irradiance(self.wavelengths_nm),
-                            limb_darkening)
+                            SunDisk(sun_angular_radius_deg, bool(limb_darkening)), self.wavelengths_nm)
+        self.sun_lobe_g, self.sun_lobe_probability = self._sun_lobe(atmosphere)
+        #: Altitude over which one majorant of the delta tracking holds (the smallest scale height
+        #: of an exponential profile; inf: the whole segment).
+        self.majorant_drop = min((float(c.profile.scale_height_m) for c in atmosphere.constituents
+                                  if c.profile.kind == "exponential"), default=math.inf)
         if self.estimator == "line_integral":
             self.line = LineIntegral(self.optics, self.geometry, SunOpticalDepth(atmosphere, self.geometry),
                                      panel_levels(atmosphere))
@@ -210,6 +222,29 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         #: Lambertian, grey albedo = the mean of their BSDF's diffuse reflectance. Objects are
         #: traced by the delta-tracking estimator (the line integral assumes open sky).
         self.objects = None
+
+    def _sun_lobe(self, atmosphere):
+        """The line integral's sun lobe (:meth:`_scatter_direction`): as peaked as the most
+        peaked aerosol's sampling density, and drawn with probability SUN_LOBE_PROBABILITY x the
+        aerosols' share of the vertical scattering optical depth at the grid's middle wavelength
+        (a Rayleigh sky has no forward peak to aim at; on the clear preset, 5% aerosol, a fixed
+        probability of 0.25 raised the variance of double scattering by half). Returns (g, P)."""
+        middle = [float(np.median(self.wavelengths_nm))]
+        depths, peaks = {}, []
+        for constituent, component in zip(atmosphere.constituents, self.optics.components):
+            if component.phase_kind is None:
+                continue
+            column = constituent.profile.column_above(0.0, atmosphere.thickness_m, np)
+            peaked = component.phase_kind != "rayleigh"
+            depths[peaked] = depths.get(peaked, 0.0) + float(constituent.scattering_coefficient(middle)[0] * column)
+            if peaked:
+                peaks.append(component.sampling_g if component.phase_kind == "tabulated"
+                             else float(dr.detach(component.params["g"])[0]))
+        total = sum(depths.values())
+        g = max(peaks, default=0.0)
+        if g <= 0.0 or total <= 0.0:
+            return 0.0, 0.0
+        return g, SUN_LOBE_PROBABILITY * depths[True] / total
 
     # --- Mitsuba plumbing ---------------------------------------------------------------------
 
@@ -234,33 +269,40 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
 
     # --- rendering ----------------------------------------------------------------------------
 
-    def render_orders(self, sensor, seed: int, spp: int, pixel_centres: bool = False, batches: int = 1) -> mi.TensorXf:
+    def render_orders(self, sensor, seed: int, spp: int, pixel_centres: bool = False, batches: int = 1,
+                      sample_offset: int = 0) -> mi.TensorXf:
         """Render through a Mitsuba sensor: a tensor (H, W, 4, N) of radiance per pixel,
         scattering order (``ORDER_NAMES``) and grid wavelength, W m^-2 sr^-1 nm^-1, from ``spp``
         samples per pixel; with ``batches`` > 1, (batches, H, W, 4, N) from as many independent
         batches of ``spp`` samples, traced in one launch. Samples cover each pixel uniformly, or
-        look along its centre only (``pixel_centres``)."""
+        look along its centre only (``pixel_centres``). A render split into calls passes the same
+        ``seed`` to each, and as ``sample_offset`` the samples per batch of the calls before."""
         width, height = (int(x) for x in sensor.film().crop_size())
-        sampler, pixel, batch = self._wavefront(seed, width * height, spp, batches)
-        offset = mi.Vector2f(0.5) if pixel_centres else sampler.next_2d()
-        position = mi.Vector2f(mi.Float(pixel % width), mi.Float(pixel // width)) + offset
-        film_uv = position * mi.Vector2f(1.0 / width, 1.0 / height)
-        ray, weight = sensor.sample_ray(time=0.0, sample1=sampler.next_1d(), sample2=film_uv,
-                                        sample3=sampler.next_2d(), active=True)
-        valid = dr.max(mi.Spectrum(weight), axis=0) > 0.0
-        image = self._estimate(sampler, pixel, batch, width * height, spp, batches, ray.o, ray.d, valid)
+
+        def camera_rays(sampler, pixel):
+            offset = mi.Vector2f(0.5) if pixel_centres else sampler.next_2d()
+            position = mi.Vector2f(mi.Float(pixel % width), mi.Float(pixel // width)) + offset
+            film_uv = position * mi.Vector2f(1.0 / width, 1.0 / height)
+            ray, weight = sensor.sample_ray(time=0.0, sample1=sampler.next_1d(), sample2=film_uv,
+                                            sample3=sampler.next_2d(), active=True)
+            return ray.o, ray.d, dr.max(mi.Spectrum(weight), axis=0) > 0.0
+
+        image = self._estimate(seed, width * height, spp, batches, camera_rays, pixel_centres, sample_offset)
         return self._tensor(image, batches, (height, width))
 
-    def render_directions(self, directions, seed: int, spp: int, batches: int = 1) -> mi.TensorXf:
+    def render_directions(self, directions, seed: int, spp: int, batches: int = 1,
+                          sample_offset: int = 0) -> mi.TensorXf:
         """Radiance seen from the observer along given unit directions (array (M, 3), east-north-
         up): a tensor (M, 4, N) like :meth:`render_orders` (or (batches, M, 4, N)), without a
         sensor or pixel filter."""
         directions = np.asarray(directions, dtype=np.float32).reshape(-1, 3)
-        count = directions.shape[0]
-        sampler, target, batch = self._wavefront(seed, count, spp, batches)
-        d = dr.gather(mi.Vector3f, mi.Vector3f(*(mi.Float(directions[:, i]) for i in range(3))), target)
-        image = self._estimate(sampler, target, batch, count, spp, batches, mi.Point3f(0.0), d, mi.Bool(True))
-        return self._tensor(image, batches, (count,))
+        table = mi.Vector3f(*(mi.Float(directions[:, i]) for i in range(3)))
+
+        def camera_rays(sampler, target):
+            return mi.Point3f(0.0), dr.gather(mi.Vector3f, table, target), mi.Bool(True)
+
+        image = self._estimate(seed, directions.shape[0], spp, batches, camera_rays, True, sample_offset)
+        return self._tensor(image, batches, (directions.shape[0],))
 
     def _tensor(self, image, batches, shape):
         shape = (*shape, len(ORDER_NAMES), len(self.wavelengths_nm))
@@ -281,28 +323,58 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         finally:
             self.optics.set_parameter(parameter, original)
 
-    def _wavefront(self, seed, targets, spp, batches):
-        """A seeded sampler for ``targets * spp * batches`` samples, each sample's target and
-        batch index. The seed and counts are opaque: calls with other seeds or sample counts
-        reuse the compiled kernels (the line-integral estimator's take seconds to compile)."""
+    def _wavefront(self, seed, targets, spp, batches, sample_offset=0):
+        """A sampler for ``targets * spp * batches`` samples, and each sample's target and batch
+        index. Sample s of a target and batch is number ``sample_offset + s`` of its sequence, so
+        that a render split into launches continues its sequences. The line-integral estimator
+        draws Owen-scrambled Sobol points (:mod:`skyref.plugins.sobol`), scrambled per target and
+        batch; delta tracking, independent numbers. The seed and counts are opaque: calls with
+        other seeds or sample counts reuse the compiled kernels (the line-integral estimator's
+        take seconds to compile)."""
         wavefront = targets * spp * batches
-        sampler = mi.load_dict({"type": "independent"})
-        sampler.seed(dr.opaque(mi.UInt32, seed), wavefront)
         index = dr.arange(mi.UInt32, wavefront)
-        return sampler, index // dr.opaque(mi.UInt32, spp * batches), index % dr.opaque(mi.UInt32, batches)
+        target = index // dr.opaque(mi.UInt32, spp * batches)
+        batch = index % dr.opaque(mi.UInt32, batches)
+        if self.estimator == "line_integral":
+            sample = index % dr.opaque(mi.UInt32, spp * batches) // dr.opaque(mi.UInt32, batches)
+            scramble = hash_combine(hash_combine(dr.opaque(mi.UInt32, seed), target), batch)
+            return ScrambledSobolSampler(sample + dr.opaque(mi.UInt32, sample_offset), scramble), target, batch
+        sampler = mi.load_dict({"type": "independent"})
+        sampler.seed(dr.opaque(mi.UInt32, (seed * 0x9E3779B1 + sample_offset * 0x85EBCA77) % (1 << 32)), wavefront)
+        return sampler, target, batch
 
-    def _estimate(self, sampler, target, batch, targets, spp, batches, origin, direction, valid):
-        """Trace one sample per lane and average into a flat (batches, targets, 4, N) buffer."""
+    def _estimate(self, seed, targets, spp, batches, camera_rays, fixed_directions, sample_offset=0):
+        """The flat (batches, targets, 4, N) radiance buffer from ``spp`` samples per target and
+        batch (numbers ``sample_offset`` on of their sequences); ``camera_rays(sampler,
+        target)`` gives each sample's (origin, direction, valid).
+
+        With the line-integral estimator and ``fixed_directions`` (one direction per target), the
+        camera segment's light (solar disk, single scattering) depends only on the point drawn
+        in the sun's disk: it is traced in its own launch with one sample per
+        ``PATHS_PER_SINGLE_SCATTERING_SAMPLE`` paths per target and batch, and the ``spp`` paths carry orders >= 2 only."""
+        if self.estimator != "line_integral" or self.objects is not None or not fixed_directions:
+            return self._launch(seed, targets, spp, batches, camera_rays, "all", sample_offset)
+        image = self._launch(seed, targets, spp, batches, camera_rays, "multiple", sample_offset)
+        share = PATHS_PER_SINGLE_SCATTERING_SAMPLE
+        image += self._launch((seed + SINGLE_SCATTERING_SEED) % (1 << 32), targets, -(-spp // share), batches,
+                              camera_rays, "single", -(-sample_offset // share))
+        return image
+
+    def _launch(self, seed, targets, spp, batches, camera_rays, orders, sample_offset):
+        """Trace one sample per lane (the ``orders`` of :meth:`trace`) and average into a flat
+        (batches, targets, 4, N) buffer."""
+        sampler, target, batch = self._wavefront(seed, targets, spp, batches, sample_offset)
+        origin, direction, valid = camera_rays(sampler, target)
         n = len(self.wavelengths_nm)
         # Wavelength channels: index (j + k * stride) mod N, each grid wavelength carried with
         # probability K / N.
         stride = n // self.channels
         first = dr.minimum(mi.UInt32(sampler.next_1d() * n), n - 1)
         indices = [(first + k * stride) % n for k in range(self.channels)]
-        orders = self.trace(sampler, mi.Point3f(origin), mi.Vector3f(direction), indices, valid)
+        contributions = self.trace(sampler, mi.Point3f(origin), mi.Vector3f(direction), indices, valid, orders)
         scale = dr.opaque(mi.Float, n / (self.channels * spp))
         image = dr.zeros(mi.Float, batches * targets * len(ORDER_NAMES) * n)
-        for order, contribution in enumerate(orders):
+        for order, contribution in enumerate(contributions):
             for k, index in enumerate(indices):
                 slot = ((batch * targets + target) * len(ORDER_NAMES) + order) * n + index
                 # A fixed reduction mode: "Auto" picks one by the buffer's size, and each new
@@ -333,16 +405,27 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         h_end = dr.select(on_object, geometry.altitude(p + length * d), h_end)
         return length, on_ground | on_object, h_end, on_object, normal, albedo
 
+    def _majorant_stretch(self, p, d, length, h, h_end):
+        """How far along the segment (length ``length``, altitudes ``h`` at its start and ``h_end``
+        at its end) one majorant holds: to where the ray has descended ``majorant_drop``, or
+        the whole segment if it never descends that far. Returns (distance, altitude there)."""
+        if self.majorant_drop == math.inf:
+            return length, h_end
+        down, up = self.geometry.level_crossings(p, d, h, h - self.majorant_drop)
+        crosses = (down < up) & (down > 0.0) & (down < length)
+        return dr.select(crosses, down, length), dr.select(crosses, h - self.majorant_drop, h_end)
+
     def _majorant(self, channels, p, d, length, h, h_end):
         h_low = self.geometry.lowest_altitude(p, d, length, h, h_end)
         return MAJORANT_SAFETY * self.optics.majorant(channels, h_low, dr.maximum(h, h_end))
 
-    def trace(self, sampler, origin, direction, indices, active):
+    def trace(self, sampler, origin, direction, indices, active, orders="all"):
         """Radiance along camera rays (origin in the observer frame, unit direction) for the
         channels ``indices``: a list of 4 ArrayXf (K channels), one per scattering order
-        (``ORDER_NAMES``), by the configured estimator."""
+        (``ORDER_NAMES``), by the configured estimator. ``orders`` (line integral only):
+        ``"all"``, ``"single"`` or ``"multiple"`` (see :meth:`_trace_line_integral`)."""
         if self.estimator == "line_integral" and self.objects is None:
-            return self._trace_line_integral(sampler, origin, direction, indices, active)
+            return self._trace_line_integral(sampler, origin, direction, indices, active, orders)
         return self._trace_delta_tracking(sampler, origin, direction, indices, active)
 
     def _enter_atmosphere(self, origin, direction, active):
@@ -362,29 +445,45 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         """Radiance of the solar disk seen along ``d`` per unit E_sun, sr^-1."""
         return self.sun.radiance_factor(dr.dot(d, self.sun.direction)) / self.sun.solid_angle
 
-    @dr.syntax
-    def _trace_line_integral(self, sampler, origin, direction, indices, active):
+    def _trace_line_integral(self, sampler, origin, direction, indices, active, orders="all"):
         """The line-integral estimator (:mod:`skyref.plugins.line_integral`). One loop iteration
         is one segment of the path: the sunlight scattered once along it is integrated by
         quadrature and filed under the order (vertices so far) + 1, as is the sunlight the
         ground reflects at its end; the path then goes on from a forced collision on the segment
         (or from the ground), with Russian roulette from ``LINE_ROULETTE_DEPTH`` vertices on.
         Camera rays from an observer on the ground only rise, so their segment is peeled off
-        the loop with the cheaper rising-only panels."""
+        the loop with the cheaper rising-only panels.
+
+        ``orders``: ``"all"``; ``"single"``, the light of the camera segment alone (the solar
+        disk and single scattering; no path goes on); or ``"multiple"``, orders >= 2 alone (the
+        camera segment only places the forced collision). For a fixed camera direction the
+        first is deterministic but for the sun's disk, so :meth:`_estimate` traces it once per
+        few samples of the second."""
         channels = self.optics.channel_coefficients(indices)
         e_sun = self.sun.channel_irradiance(indices)
         d = mi.Vector3f(direction)
         p, h, misses = self._enter_atmosphere(origin, d, active)
-        direct = dr.select(misses, e_sun * self._solar_disk(d), channels.zeros())
+        direct = channels.zeros()
+        if orders != "multiple":
+            direct = dr.select(misses, e_sun * self._solar_disk(d), direct)
         single, double, higher = channels.zeros(), channels.zeros(), channels.zeros()
         throughput = channels.zeros() + 1.0
         alive = mi.Bool(active) & ~misses
 
         light, sun_disk, p, d, h, throughput, alive = self._line_segment(
             sampler, channels, e_sun, p, d, h, throughput, alive, camera=True,
-            rising_only=self.geometry.h0 == 0.0)
+            rising_only=self.geometry.h0 == 0.0, sunlight=orders != "multiple")
         direct += sun_disk
         single += light
+        if orders != "single":
+            double, higher = self._scattered_light(sampler, channels, e_sun, p, d, h, throughput, alive)
+        return [direct, single, double, higher]
+
+    @dr.syntax
+    def _scattered_light(self, sampler, channels, e_sun, p, d, h, throughput, alive):
+        """Orders 2 and >= 3 of a line-integral path that goes on from its first vertex (point p
+        at altitude h, direction d, throughput): one loop iteration per segment."""
+        double, higher = channels.zeros(), channels.zeros()
         depth = mi.UInt32(1)
         alive &= depth < self.max_depth
 
@@ -401,12 +500,14 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             throughput = dr.select(roulette & survives, throughput / survival, throughput)
             alive &= ~(roulette & ~survives) & (depth < self.max_depth)
 
-        return [direct, single, double, higher]
+        return double, higher
 
-    def _line_segment(self, sampler, channels, e_sun, p, d, h, throughput, alive, camera, rising_only):
+    def _line_segment(self, sampler, channels, e_sun, p, d, h, throughput, alive, camera, rising_only,
+                      sunlight=True):
         """One segment of a line-integral path from vertex ``p`` (altitude ``h``) along ``d``.
         Returns (light filed under this segment's order, the solar disk seen through it when
-        ``camera``, and the next vertex: point, direction, altitude, throughput, alive)."""
+        ``camera``, and the next vertex: point, direction, altitude, throughput, alive). Without
+        ``sunlight`` the segment's light is not computed (it is 0): only where the path goes on."""
         geometry, optics, sun = self.geometry, self.optics, self.sun
         t_ground = geometry.distance_to_ground(p, d, h)
         t_top = geometry.distance_to_top(p, d, h)
@@ -414,24 +515,24 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         length = dr.select(on_ground, t_ground, t_top)
         sun_direction, sun_factor = sun.sample_direction(sampler.next_2d())
         grey_s, grey_t, grey_albedo = channels.grey(throughput)
-        sunlight, transmittance, quadrature = self.line.integrate(
-            channels, p, d, h, length, sun_direction, (grey_s, grey_t), rising_only)
-        light = throughput * sunlight * e_sun * sun_factor
-        sun_disk = channels.zeros()
-        if camera:
-            sun_disk = dr.select(alive & ~on_ground, throughput * transmittance * e_sun * self._solar_disk(d),
-                                 sun_disk)
-
-        # -- the ground at the segment's end reflects sunlight (Lambertian; lit iff the sun is
-        # above its horizon: the planet is convex) -------------------------------------------------
+        scattered, transmittance, quadrature = self.line.integrate(
+            channels, p, d, h, length, sun_direction, (grey_s, grey_t), rising_only, sunlight)
         ground = p + length * d
         up = geometry.up(ground)
-        cos_sun = dr.dot(up, sun_direction)
-        tau_sun = self.line.sun_depth(mi.Float(0.0), cos_sun)
-        reflected = (throughput * transmittance * channels.albedo * e_sun * sun_factor
-                     * dr.exp(-channels.optical_depth(tau_sun)) * (dr.maximum(cos_sun, 0.0) / math.pi))
-        light += dr.select(on_ground & (cos_sun > 0.0), reflected, 0.0)
-        light = dr.select(alive, light, 0.0)
+        light, sun_disk = channels.zeros(), channels.zeros()
+        if sunlight:
+            light = throughput * scattered * e_sun * sun_factor
+            if camera:
+                sun_disk = dr.select(alive & ~on_ground, throughput * transmittance * e_sun * self._solar_disk(d),
+                                     sun_disk)
+            # -- the ground at the segment's end reflects sunlight (Lambertian; lit iff the sun
+            # is above its horizon: the planet is convex) ---------------------------------------
+            cos_sun = dr.dot(up, sun_direction)
+            tau_sun = self.line.sun_depth(mi.Float(0.0), cos_sun)
+            reflected = (throughput * transmittance * channels.albedo * e_sun * sun_factor
+                         * dr.exp(-channels.optical_depth(tau_sun)) * (dr.maximum(cos_sun, 0.0) / math.pi))
+            light += dr.select(on_ground & (cos_sun > 0.0), reflected, 0.0)
+            light = dr.select(alive, light, 0.0)
 
         # -- where the path goes on: a forced collision in the air, or the ground --------------------
         air_mass = sum(quadrature.masses, mi.Float(0.0))
@@ -439,14 +540,15 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         ground_mass = dr.select(on_ground, grey_transmittance * grey_albedo, 0.0)
         p_air = air_mass / dr.maximum(air_mass + ground_mass, 1e-30)
         alive &= (air_mass + ground_mass) > 0.0
-        in_air = sampler.next_1d() < p_air
-        u_panel, u_position = sampler.next_1d(), sampler.next_1d()
-        x, hx, weight, (parts, sigma_s, _) = self.line.sample_collision(channels, quadrature, p, d, u_panel,
-                                                                        u_position)
-        u_component, u_direction = sampler.next_1d(), sampler.next_2d()
-        mu, pdf = optics.sample_phase(parts, sigma_s, u_component, u_direction.x)
-        d_air = direction_with_cosine(d, mu, u_direction.y)
-        air_throughput = throughput * weight * optics.phase(parts, sigma_s, mu) / (pdf * dr.maximum(p_air, 1e-30))
+        # One decision places the next vertex and turns the path there: (where, cos, azimuth);
+        # "where" < p_air picks the air, and its position within [0, p_air) the collision point.
+        vertex_sample = sampler.next_3d()
+        in_air = vertex_sample.x < p_air
+        u_air = dr.minimum(vertex_sample.x / dr.maximum(p_air, 1e-30), 1.0 - 2.0 ** -24)
+        x, hx, weight, (parts, sigma_s, _) = self.line.sample_collision(channels, quadrature, p, d, u_air)
+        u_direction = mi.Point2f(vertex_sample.y, vertex_sample.z)
+        d_air, phase_weight = self._scatter_direction(parts, sigma_s, d, sampler.next_1d(), u_direction)
+        air_throughput = throughput * weight * phase_weight / dr.maximum(p_air, 1e-30)
         d_ground = mi.Frame3f(up).to_world(mi.warp.square_to_cosine_hemisphere(u_direction))
         ground_throughput = throughput * transmittance * channels.albedo / dr.maximum(1.0 - p_air, 1e-30)
         p = dr.select(in_air, x, ground)
@@ -454,6 +556,28 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         d = dr.select(in_air, d_air, d_ground)
         throughput = dr.select(in_air, air_throughput, ground_throughput)
         return light, sun_disk, p, d, h, throughput, alive
+
+    def _scatter_direction(self, parts, sigma_s, d, u_choice, u_direction):
+        """The direction a line-integral path takes at a scattering event (incident direction d)
+        and its weight p / pdf per channel. With probability ``sun_lobe_probability`` it is drawn
+        from a Henyey–Greenstein lobe around the sun (parameter ``sun_lobe_g``): light that
+        scatters once more on the way towards the sun meets the aerosol's forward peak there, which
+        the local phase function rarely sends a path into; otherwise from the local phase
+        function. The pdf is the mixture of both (one-sample MIS, balance heuristic)."""
+        optics, beta = self.optics, self.sun_lobe_probability
+        if beta == 0.0:
+            mu, pdf = optics.sample_phase(parts, sigma_s, u_choice, u_direction.x)
+            return direction_with_cosine(d, mu, u_direction.y), optics.phase(parts, sigma_s, mu) / pdf
+        lobe = u_choice < beta
+        u_component = dr.select(lobe, 0.0, (u_choice - beta) / (1.0 - beta))
+        mu_phase, _ = optics.sample_phase(parts, sigma_s, u_component, u_direction.x)
+        towards_sun = direction_with_cosine(self.sun.direction, sample_henyey_greenstein_cosine(
+            u_direction.x, self.sun_lobe_g), u_direction.y)
+        direction = dr.select(lobe, towards_sun, direction_with_cosine(d, mu_phase, u_direction.y))
+        mu = dr.clip(dr.dot(d, direction), -1.0, 1.0)
+        pdf = ((1.0 - beta) * optics.phase_pdf(parts, sigma_s, mu)
+               + beta * henyey_greenstein_phase(dr.dot(self.sun.direction, direction), self.sun_lobe_g, xp))
+        return direction, optics.phase(parts, sigma_s, mu) / pdf
 
     @dr.syntax
     def _trace_delta_tracking(self, sampler, origin, direction, indices, active):
@@ -498,7 +622,13 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             length = dr.select(in_shadow, q_remaining, remaining)
             hx = dr.select(in_shadow, hq, h)
             hx_end = dr.select(in_shadow, geometry.H, h_end)
-            majorant = self._majorant(channels, x, w, length, hx, hx_end)
+            # The majorant holds over the next *stretch* of the segment only: as far as the ray
+            # descends by ``majorant_drop``. A ray coming down from high up would otherwise
+            # track thin air with the extinction at the ground (from 1000 km, through a
+            # turbidity-50 haze: ~10^3 null collisions per ray). Past a stretch without a
+            # collision the tracking starts afresh (free flights are memoryless).
+            reach, h_reach = self._majorant_stretch(x, w, length, hx, hx_end)
+            majorant = self._majorant(channels, x, w, reach, hx, h_reach)
             # Camera rays draw candidate points more densely than the majorant where the segment
             # is optically thin: ~CAMERA_SUN_CONNECTIONS over the rest of the segment, at most
             # CAMERA_MAX_BOOST x the majorant. Each carries a sun connection, which is what makes
@@ -508,9 +638,11 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             rate = dr.select(camera, dr.clip(CAMERA_SUN_CONNECTIONS / dr.maximum(length, 1e-3), majorant,
                                              CAMERA_MAX_BOOST * majorant), majorant)
             t = -dr.log(1.0 - sampler.next_1d()) / rate
-            collides = t < length
-            x = dr.select(collides, x + t * w, x)
-            hx = dr.select(collides, geometry.altitude(x), hx)
+            collides = t < reach
+            stretch_done = ~collides & (reach < length)      # no collision in it: on to the next
+            x = dr.select(collides, x + t * w, dr.select(stretch_done, x + reach * w, x))
+            hx = dr.select(collides, geometry.altitude(x), dr.select(stretch_done, h_reach, hx))
+            t = dr.select(stretch_done, reach, t)
             parts, sigma_s, sigma_t = optics.local(channels, hx)
 
             # -- shadow ray: ratio tracking; file the contribution when it leaves -------------------
@@ -523,10 +655,11 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             survival = dr.detach(dr.max(transmittance, axis=0)) / SHADOW_ROULETTE
             survives = sampler.next_1d() < survival
             transmittance = dr.select(faint, dr.select(survives, transmittance / survival, 0.0), transmittance)
-            q = dr.select(shadow_step, x, q)
-            hq = dr.select(shadow_step, hx, hq)
-            q_remaining = dr.select(shadow_step, q_remaining - t, q_remaining)
-            shadow_done = in_shadow & (~collides | (dr.max(transmittance, axis=0) <= 0.0))
+            shadow_moves = shadow_step | (in_shadow & stretch_done)
+            q = dr.select(shadow_moves, x, q)
+            hq = dr.select(shadow_moves, hx, hq)
+            q_remaining = dr.select(shadow_moves, q_remaining - t, q_remaining)
+            shadow_done = in_shadow & ((~collides & ~stretch_done) | (dr.max(transmittance, axis=0) <= 0.0))
             contribution = pending * transmittance
             single = dr.select(shadow_done & (pending_order == 1), single + contribution, single)
             double = dr.select(shadow_done & (pending_order == 2), double + contribution, double)
@@ -536,10 +669,11 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
 
             # -- path: a tentative collision in the air ----------------------------------------------
             candidate = collides & tracking_path
-            reaches_end = tracking_path & ~candidate
-            p = dr.select(candidate, x, p)
-            h = dr.select(candidate, hx, h)
-            remaining = dr.select(candidate, remaining - t, remaining)
+            moves_on = tracking_path & stretch_done
+            reaches_end = tracking_path & ~candidate & ~stretch_done
+            p = dr.select(candidate | moves_on, x, p)
+            h = dr.select(candidate | moves_on, hx, h)
+            remaining = dr.select(candidate | moves_on, remaining - t, remaining)
             # Next-event estimation at *every* candidate point, weighted by the expected value of
             # the real-scattering branch: P_s * (w sigma_s / (mu P_s)) = w sigma_s / mu, with mu
             # the candidates' rate. The event decision below then only decides how the path goes on.

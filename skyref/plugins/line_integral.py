@@ -96,12 +96,14 @@ class LineIntegral:
 
     # --- single scattering along the segment ----------------------------------------------------
 
-    def integrate(self, channels, p, d, h, length, sun, grey, rising_only=False):
+    def integrate(self, channels, p, d, h, length, sun, grey, rising_only=False, sunlight=True):
         """Single-scattered sunlight along the segment per channel (ArrayXf, to be multiplied by
         E_sun), its transmittance T(0, L) per channel, and the :class:`SegmentQuadrature`.
         ``grey`` = (grey scattering, grey extinction) coefficients per constituent (detached
         Floats or None), for the forced collision's proxy. ``rising_only``: the caller
-        guarantees the segment never descends (a ray leaving the ground)."""
+        guarantees the segment never descends (a ray leaving the ground). Without ``sunlight``
+        only the quadrature is built (for a forced collision whose single scattering is counted
+        elsewhere: no sun optical depths, no per-channel exponentials) and the sunlight is 0."""
         optics, rule = self.optics, self.rule
         components = optics.components
         panels, lit = self._panels(channels, p, d, h, length, sun, rising_only)
@@ -110,7 +112,7 @@ class LineIntegral:
                  for c, (s, _) in zip(components, channels.coefficients)]
         extinction = channels.extinction
         grey_s, grey_t = grey
-        sunlight = channels.zeros()
+        light = channels.zeros()
         prefix = [mi.Float(0.0) for _ in components]
         prefixes, masses, maps = [], [], []
         for (a, b), panel_lit in zip(panels, lit):
@@ -127,23 +129,24 @@ class LineIntegral:
                 # optical depth from the segment's start to this node, per constituent
                 tau = [prefix[c] + sum(rule.cumulative[j][m] * density_du[m][c] for m in range(rule.count))
                        for c in range(len(components))]
-                tau_sun = self.sun_depth(hx, dr.dot(self.geometry.up(x), sun))
-                exponent = channels.zeros()
-                source = channels.zeros()
-                for c in range(len(components)):
-                    if extinction[c] is not None:
-                        exponent = exponent + extinction[c] * (tau[c] + tau_sun[c])
-                    if phase[c] is not None:
-                        source = source + channels.coefficients[c][0] * (rho[c] * phase[c])
                 weight = width * stretch[j][1] * rule.weights[j]
-                sunlight = sunlight + source * dr.exp(-exponent) * dr.select(panel_lit, weight, 0.0)
+                if sunlight:
+                    tau_sun = self.sun_depth(hx, dr.dot(self.geometry.up(x), sun))
+                    exponent = channels.zeros()
+                    source = channels.zeros()
+                    for c in range(len(components)):
+                        if extinction[c] is not None:
+                            exponent = exponent + extinction[c] * (tau[c] + tau_sun[c])
+                        if phase[c] is not None:
+                            source = source + channels.coefficients[c][0] * (rho[c] * phase[c])
+                    light = light + source * dr.exp(-exponent) * dr.select(panel_lit, weight, 0.0)
                 # grey proxy of sigma_s(t) T(0, t), for the forced collision
                 mass = mass + weight * dr.detach(grey_sum(grey_s, rho) * dr.exp(-grey_sum(grey_t, tau)))
             masses.append(mass)
             prefix = [prefix[c] + sum(rule.weights[m] * density_du[m][c] for m in range(rule.count))
                       for c in range(len(components))]
         transmittance = dr.exp(-channels.optical_depth(prefix))
-        return sunlight, transmittance, SegmentQuadrature(panels, maps, prefixes, prefix, masses)
+        return light, transmittance, SegmentQuadrature(panels, maps, prefixes, prefix, masses)
 
     def _panel_map(self, channels, p, d, a, width):
         """The change of variable t = a + width g(u), u in [0, 1], of one panel: uniform for an
@@ -167,25 +170,31 @@ class LineIntegral:
 
     # --- the forced collision ------------------------------------------------------------------
 
-    def sample_collision(self, channels, quadrature, p, d, u_panel, u_position):
-        """A point of the segment: the panel i chosen by its grey mass, then t = a_i + (b_i - a_i)
-        g_i(u) with u uniform (pdf(t) = (mass_i / total) / ((b_i - a_i) g_i'(u))). Returns (point, altitude, sigma_s(t) T(0, t) / pdf(t) per
-        channel, the local coefficients (parts, sigma_s, sigma_t) at the point). The caller
-        makes sure the total mass is positive."""
+    def sample_collision(self, channels, quadrature, p, d, u):
+        """A point of the segment from one uniform number ``u``: the panel i chosen by its grey
+        mass (u falls in its share of the cumulative masses), then t = a_i + (b_i - a_i) g_i(v)
+        with v the position of u within that share (uniform; pdf(t) = (mass_i / total) /
+        ((b_i - a_i) g_i'(v))), so that stratified u give stratified points. Returns (point,
+        altitude, sigma_s(t) T(0, t) / pdf(t) per channel, the local coefficients (parts,
+        sigma_s, sigma_t) at the point). The caller makes sure the total mass is positive."""
         total = sum(quadrature.masses, mi.Float(0.0))
-        target = u_panel * total
+        target = u * total
         cumulative = mi.Float(0.0)
-        a, width, mass = mi.Float(0.0), mi.Float(0.0), mi.Float(1.0)
-        g, dg = mi.Float(0.0), mi.Float(1.0)
+        a, width, mass, start = mi.Float(0.0), mi.Float(0.0), mi.Float(1.0), mi.Float(0.0)
         prefix = [mi.Float(0.0) for _ in quadrature.total]
-        for (lo, hi), panel_map, panel_prefix, panel_mass in zip(quadrature.panels, quadrature.maps,
-                                                                 quadrature.prefix, quadrature.masses):
+        chosen_panels = []
+        for (lo, hi), panel_prefix, panel_mass in zip(quadrature.panels, quadrature.prefix, quadrature.masses):
             chosen = (target >= cumulative) & (panel_mass > 0.0)
+            chosen_panels.append(chosen)
             a, width, mass = dr.select(chosen, lo, a), dr.select(chosen, hi - lo, width), dr.select(chosen, panel_mass, mass)
-            g_panel, dg_panel = panel_map(u_position)
-            g, dg = dr.select(chosen, g_panel, g), dr.select(chosen, dg_panel, dg)
+            start = dr.select(chosen, cumulative, start)
             prefix = [dr.select(chosen, q, old) for q, old in zip(panel_prefix, prefix)]
             cumulative = cumulative + panel_mass
+        v = dr.clip((target - start) / mass, 0.0, 1.0 - 2.0 ** -24)
+        g, dg = mi.Float(0.0), mi.Float(1.0)
+        for chosen, panel_map in zip(chosen_panels, quadrature.maps):
+            g_panel, dg_panel = panel_map(v)
+            g, dg = dr.select(chosen, g_panel, g), dr.select(chosen, dg_panel, dg)
         step = g * width
         t = a + step
         # optical depth from the panel's start to t, by the rule on [a, t]

@@ -55,7 +55,7 @@ sampled point *before* ``combined_extinction`` is stored in the interaction. Hen
   (measured, whole sky, 2 shared cores, llvm_ad_rgb: 0.50 M paths/s against 0.78 M).
 
 Every majorant is *grey* (the largest value over the ray's channels, the same in all channels:
-per-channel majorants bias ``prbvolpath`` and inflate ``volpath``'s variance, DESIGN.md), and
+per-channel majorants bias ``prbvolpath`` and inflate ``volpath``'s variance, docs/design.md), and
 inflated by ``MAJORANT_SAFETY`` against float32 rounding of altitudes.
 
 Differentiable parameters (``mi.traverse``): those of ``AtmosphereOptics.parameters()`` except
@@ -121,7 +121,7 @@ class AtmosphereMediumMethods:
                   majorant: str = "segment"):
         """Set the atmosphere (Atmosphere, preset name or JSON), the wavelength grid (nm;
         default :func:`default_wavelengths`), the observer's altitude (m) and the majorant mode."""
-        from skyref.atmosphere.validation import check_choice, check_number
+        from skyref.validation import check_choice, check_number
 
         atmosphere = atmosphere_from_property(atmosphere)
         self.majorant_mode = check_choice("majorant", majorant, MAJORANT_MODES)

@@ -21,7 +21,7 @@ Differences that remain, by construction:
   sky changes by ~1e-4 relative or less per metre of altitude. Distances to the ground carry
   errors of metres (measured: looking 5 degrees down from 1 m, the ground 11.4 m away comes
   ~2 m early, and volpath is 16-20% darker than the integrator there), and ground bounces are
-  only trustworthy with a black ground (DESIGN.md: the float32 sphere self-intersects there).
+  only trustworthy with a black ground (docs/design.md: the float32 sphere self-intersects there).
 
 The ``skyref_directions`` sensor (:class:`DirectionsSensorMethods`) shoots rays along a given
 list of M directions, one per film column (the rows are independent repeats), for

@@ -1,14 +1,34 @@
-"""Checks run when a model object is built: each raises :class:`ParameterError` naming the
-parameter, the value given and the valid range."""
+"""Checks run before any work: each raises :class:`~skyref.errors.ParameterError` naming the
+parameter, the value given and the valid range.
+
+- Parameter checks (``check_number``, ``check_array``, ``check_choice``, ...), run when a model
+  object is built or an option is read.
+- Where skyref may write: an output path is refused when it cannot be written — wrong
+  extension, an existing directory where a file should go (or a file where a directory should),
+  no writable existing ancestor — and nothing is created by the check: the directories appear
+  only when the first file is written (:func:`skyref.io.atomic.atomic_path`), so a run refused
+  later leaves nothing behind. Names that become file names go through :func:`safe_file_name`.
+"""
 
 from __future__ import annotations
 
 import math
+import os
+import re
+import tempfile
 
 import numpy as np
 
 from skyref.errors import ParameterError
 
+__all__ = ["check_number", "check_array", "check_fields", "check_int", "check_int_tuple", "check_choice",
+           "check_view", "check_output_file", "check_output_directory", "safe_file_name"]
+
+#: Longest file name :func:`safe_file_name` returns, characters.
+MAX_FILE_NAME = 100
+
+
+# --- parameters -----------------------------------------------------------------------------------
 
 def check_number(name: str, value, lo: float = -math.inf, hi: float = math.inf,
                  lo_open: bool = False, hi_open: bool = False) -> float:
@@ -106,3 +126,49 @@ def check_view(directions, sun_direction, observer_altitude_m) -> tuple:
         raise ParameterError("sun_direction", sun.tolist(), "a non-zero 3-vector", "invalid direction")
     altitude = check_number("observer_altitude_m", observer_altitude_m, 0.0, 1.0e8)
     return dirs, sun / np.linalg.norm(sun), altitude
+
+
+# --- output paths ---------------------------------------------------------------------------------
+
+def check_output_file(path: str, suffix: str, option: str) -> None:
+    """Refuse ``path`` (named ``option`` in the error) unless it ends in ``suffix``, is not a
+    directory and lies under a writable directory."""
+    path = os.fspath(path)
+    if not path.lower().endswith(suffix):
+        raise ParameterError(option, path, f"a file name ending in {suffix}", "wrong extension")
+    if os.path.isdir(path):
+        raise ParameterError(option, path, f"a file name ending in {suffix}", "an existing directory")
+    _check_writable(os.path.dirname(os.path.abspath(path)), path, option)
+
+
+def check_output_directory(path: str, option: str) -> None:
+    """Refuse ``path`` (named ``option`` in the error) unless it is a directory, or can become
+    one, under a writable directory."""
+    path = os.fspath(path)
+    if os.path.exists(path) and not os.path.isdir(path):
+        raise ParameterError(option, path, "a directory", "an existing file")
+    _check_writable(os.path.abspath(path), path, option)
+
+
+def _check_writable(directory: str, shown: str, option: str) -> None:
+    """The nearest existing ancestor of ``directory`` must be a directory where a file can be
+    created (probed with a temporary file, removed again)."""
+    existing = directory
+    while not os.path.exists(existing):
+        existing = os.path.dirname(existing)
+    if not os.path.isdir(existing):
+        raise ParameterError(option, shown, "a path in a writable directory", f"{existing} is a file")
+    try:
+        with tempfile.TemporaryFile(dir=existing):
+            pass
+    except OSError as exc:
+        raise ParameterError(option, shown, "a path in a writable directory",
+                             f"cannot write in {existing} ({exc.strerror})") from None
+
+
+def safe_file_name(name: str) -> str:
+    """``name`` as one file name that stays where it is put: characters other than letters,
+    digits, '.', '_' and '-' become '_', leading dots are dropped (no '..', no hidden files),
+    at most MAX_FILE_NAME characters; 'unnamed' if nothing is left."""
+    safe = re.sub(r"[^A-Za-z0-9._-]", "_", str(name)).lstrip(".")[:MAX_FILE_NAME]
+    return safe or "unnamed"
