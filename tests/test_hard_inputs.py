@@ -178,3 +178,13 @@ def test_a_name_only_scene_says_what_it_uses(tmp_path, capsys):
     scene.write_text(EARTH_CLEAR.read_text())
     assert main(["validate", str(scene)]) == 0
     assert "defaults used" not in capsys.readouterr().out
+
+
+def test_batch_refuses_skies_too_large_to_render_before_starting_workers(tmp_path, capsys):
+    """16384x16384 at 48 wavelengths used to pass validation and die inside Dr.Jit (2^32
+    entries) as "4 workers died"; the grid is refused up front, naming the camera."""
+    grid = grid_file(tmp_path, '"sun.zenith_deg" = [30.0, 60.0]',
+                     'directory = "out"\nspp = 16\nwidth = 16384\nheight = 16384\npasses = 16')
+    line = refused(capsys, ["batch", grid, "-q"], "base.scene")
+    assert "camera" in line and "tiles" in line
+    nothing_written(tmp_path, "grid.toml")
