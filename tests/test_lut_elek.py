@@ -25,7 +25,7 @@ import numpy as np
 import pytest
 
 WL = [680.0, 550.0, 440.0]
-SEEDS = range(8)
+SEEDS = range(16)
 SPP = 20_000
 
 
@@ -183,7 +183,8 @@ def test_phase_functions(mi):
 
 
 def test_single_scattering_matches_ground_truth_and_converges(mi, sky_truth):
-    """scattering_orders=1 vs the path tracer's ``single`` channel (rel. se <= 0.31%): largest
+    """scattering_orders=1 vs the path tracer's ``single`` channel (rel. se <= 0.31% with 8 seeds,
+    16 now so that the bound below has a margin over the noise of the standard error): largest
     error 1.5% at 8x32x8 cells, 0.54% at 16x64x16, rms 0.7% and 0.17% (measured)."""
     sun = directions(40.0, 0.0)
     truth, se = sky_truth["single"], sky_truth["single_se"]

@@ -115,12 +115,46 @@ LINE_ROULETTE_THROUGHPUT = 0.1
 #: sun zenith 60: 0.25 cut the variance of double scattering 10x, of 3+ orders 1.4x).
 SUN_LOBE_PROBABILITY = 0.3
 
+#: Most per-sample values (samples x 4 orders x wavelengths) one launch holds before they are
+#: summed per target (2^27 float32: 512 MB).
+MAX_LANE_VALUES = 1 << 27
+
 #: Offset between the seed of a render's paths and that of its single-scattering launch.
 SINGLE_SCATTERING_SEED = 0x9E3779B9
 
 #: Paths per sample of the camera segment's light when the camera direction is fixed (only the
 #: point in the sun's disk varies): the single-scattering launch costs at most ~1/8 more.
 PATHS_PER_SINGLE_SCATTERING_SAMPLE = 8
+
+
+class PathSegment:
+    """The free segment a delta-tracking path is on (:meth:`AtmosphereIntegrator._segment`):
+    the distance left to its end (m), whether it ends on a surface (the ground or an object), the
+    altitude at its end (m; exact for the ground and the top), and, for an object, its normal
+    (facing the ray) and grey albedo."""
+
+    DRJIT_STRUCT = {"remaining": mi.Float, "on_surface": mi.Bool, "h_end": mi.Float, "on_object": mi.Bool,
+                    "object_normal": mi.Vector3f, "object_albedo": mi.Float}
+
+    def __init__(self, remaining=None, on_surface=None, h_end=None, on_object=None, object_normal=None,
+                 object_albedo=None):
+        self.remaining, self.on_surface, self.h_end = remaining, on_surface, h_end
+        self.on_object, self.object_normal, self.object_albedo = on_object, object_normal, object_albedo
+
+
+class ShadowRay:
+    """A delta-tracking lane's shadow ray towards the sun (one in flight at a time): whether one
+    is in flight, its point, altitude (m) and direction, the distance left to the top of the
+    atmosphere (m), its transmittance so far (ratio tracking, per channel), what it carries (the
+    vertex's throughput x response x E_sun, per channel) and the order it is filed under."""
+
+    DRJIT_STRUCT = {"active": mi.Bool, "point": mi.Point3f, "altitude": mi.Float, "direction": mi.Vector3f,
+                    "remaining": mi.Float, "transmittance": mi.ArrayXf, "pending": mi.ArrayXf, "order": mi.UInt32}
+
+    def __init__(self, active=None, point=None, altitude=None, direction=None, remaining=None,
+                 transmittance=None, pending=None, order=None):
+        self.active, self.point, self.altitude, self.direction = active, point, altitude, direction
+        self.remaining, self.transmittance, self.pending, self.order = remaining, transmittance, pending, order
 
 
 class SunLight:
@@ -332,11 +366,13 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         other seeds or sample counts reuse the compiled kernels (the line-integral estimator's
         take seconds to compile)."""
         wavefront = targets * spp * batches
+        # Lanes in the order (batch, target, sample): a target's samples of one batch are
+        # contiguous, so that :meth:`_launch` sums them block by block, in a fixed order.
         index = dr.arange(mi.UInt32, wavefront)
-        target = index // dr.opaque(mi.UInt32, spp * batches)
-        batch = index % dr.opaque(mi.UInt32, batches)
+        batch = index // dr.opaque(mi.UInt32, targets * spp)
+        target = index // dr.opaque(mi.UInt32, spp) % dr.opaque(mi.UInt32, targets)
         if self.estimator == "line_integral":
-            sample = index % dr.opaque(mi.UInt32, spp * batches) // dr.opaque(mi.UInt32, batches)
+            sample = index % dr.opaque(mi.UInt32, spp)
             scramble = hash_combine(hash_combine(dr.opaque(mi.UInt32, seed), target), batch)
             return ScrambledSobolSampler(sample + dr.opaque(mi.UInt32, sample_offset), scramble), target, batch
         sampler = mi.load_dict({"type": "independent"})
@@ -346,34 +382,69 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
     def _estimate(self, seed, targets, spp, batches, camera_rays, fixed_directions, sample_offset=0):
         """The flat (batches, targets, 4, N) radiance buffer from ``spp`` samples per target and
         batch (numbers ``sample_offset`` on of their sequences); ``camera_rays(sampler,
-        target)`` gives each sample's (origin, direction, valid).
+        target)`` gives each sample's (origin, direction, valid). Launches hold at most
+        MAX_LANE_VALUES per-sample values (4 orders x N wavelengths per sample): more samples are
+        traced in several launches that continue the sequences.
 
         With the line-integral estimator and ``fixed_directions`` (one direction per target), the
         camera segment's light (solar disk, single scattering) depends only on the point drawn
         in the sun's disk: it is traced in its own launch with one sample per
         ``PATHS_PER_SINGLE_SCATTERING_SAMPLE`` paths per target and batch, and the ``spp`` paths carry orders >= 2 only."""
         if self.estimator != "line_integral" or self.objects is not None or not fixed_directions:
-            return self._launch(seed, targets, spp, batches, camera_rays, "all", sample_offset)
-        image = self._launch(seed, targets, spp, batches, camera_rays, "multiple", sample_offset)
+            return self._launches(seed, targets, spp, batches, camera_rays, "all", sample_offset)
+        image = self._launches(seed, targets, spp, batches, camera_rays, "multiple", sample_offset)
         share = PATHS_PER_SINGLE_SCATTERING_SAMPLE
-        image += self._launch((seed + SINGLE_SCATTERING_SEED) % (1 << 32), targets, -(-spp // share), batches,
-                              camera_rays, "single", -(-sample_offset // share))
+        image += self._launches((seed + SINGLE_SCATTERING_SEED) % (1 << 32), targets, -(-spp // share), batches,
+                                camera_rays, "single", -(-sample_offset // share))
+        return image
+
+    def _launches(self, seed, targets, spp, batches, camera_rays, orders, sample_offset):
+        """:meth:`_launch` in pieces of at most MAX_LANE_VALUES per-sample values, combined by
+        their sample counts."""
+        per_sample = targets * batches * len(ORDER_NAMES) * len(self.wavelengths_nm)
+        step = max(1, min(spp, MAX_LANE_VALUES // per_sample))
+        image, done = None, 0
+        while done < spp:
+            count = min(step, spp - done)
+            part = self._launch(seed, targets, count, batches, camera_rays, orders, sample_offset + done)
+            part = part * (count / spp) if count < spp else part
+            image = part if image is None else image + part
+            done += count
         return image
 
     def _launch(self, seed, targets, spp, batches, camera_rays, orders, sample_offset):
         """Trace one sample per lane (the ``orders`` of :meth:`trace`) and average into a flat
-        (batches, targets, 4, N) buffer."""
+        (batches, targets, 4, N) buffer.
+
+        With every wavelength on every path (the default), each target's samples are summed in
+        blocks, in a fixed order, so the same seed gives the same bits. With fewer wavelengths
+        per path the samples of a target carry different wavelengths and are added atomically
+        (the last bits of a sum may then differ between runs)."""
         sampler, target, batch = self._wavefront(seed, targets, spp, batches, sample_offset)
         origin, direction, valid = camera_rays(sampler, target)
         n = len(self.wavelengths_nm)
-        # Wavelength channels: index (j + k * stride) mod N, each grid wavelength carried with
-        # probability K / N.
-        stride = n // self.channels
-        first = dr.minimum(mi.UInt32(sampler.next_1d() * n), n - 1)
-        indices = [(first + k * stride) % n for k in range(self.channels)]
+        # Wavelength channels: all of them in grid order, or index (j + k * stride) mod N with j
+        # uniform, each grid wavelength carried with probability K / N.
+        if self.channels == n:
+            indices = [mi.UInt32(k) for k in range(n)]
+        else:
+            stride = n // self.channels
+            first = dr.minimum(mi.UInt32(sampler.next_1d() * n), n - 1)
+            indices = [(first + k * stride) % n for k in range(self.channels)]
         contributions = self.trace(sampler, mi.Point3f(origin), mi.Vector3f(direction), indices, valid, orders)
         scale = dr.opaque(mi.Float, n / (self.channels * spp))
         image = dr.zeros(mi.Float, batches * targets * len(ORDER_NAMES) * n)
+        if self.channels == n:
+            # Each target's samples are contiguous lanes (batch, target, sample): sum them block by
+            # block, in a fixed order, into the (batch, target, order, channel) layout.
+            values = [[dr.select(valid, value * scale, 0.0) for value in contribution] for contribution in contributions]
+            dr.eval(values)                                   # one path-tracer kernel for all of them
+            group = dr.arange(mi.UInt32, batches * targets)
+            for order, per_channel in enumerate(values):
+                for k, value in enumerate(per_channel):
+                    dr.scatter(image, dr.block_sum(value, spp, mode="evaluated"),
+                               (group * len(ORDER_NAMES) + order) * n + k)
+            return image
         for order, contribution in enumerate(contributions):
             for k, index in enumerate(indices):
                 slot = ((batch * targets + target) * len(ORDER_NAMES) + order) * n + index
@@ -386,9 +457,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
     # --- the path tracer ------------------------------------------------------------------------
 
     def _segment(self, p, d, h):
-        """Where the free segment from p along d ends: its length, whether it ends on a surface
-        (the ground or an object), the altitude at its end (exact for the ground and the top),
-        and, for an object, its normal (facing the ray) and grey albedo."""
+        """The free segment from p along d, as a :class:`PathSegment`."""
         geometry = self.geometry
         t_ground = geometry.distance_to_ground(p, d, h)
         t_top = geometry.distance_to_top(p, d, h)
@@ -396,14 +465,14 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         length = dr.select(on_ground, t_ground, t_top)
         h_end = dr.select(on_ground, 0.0, geometry.H)
         if dr.hint(self.objects is None, mode="scalar"):
-            return length, on_ground, h_end, mi.Bool(False), mi.Vector3f(0.0), mi.Float(0.0)
+            return PathSegment(length, on_ground, h_end, mi.Bool(False), mi.Vector3f(0.0), mi.Float(0.0))
         si = self.objects.ray_intersect(mi.Ray3f(p, d, length))
         on_object = si.is_valid() & (si.t < length)
         normal = dr.select(dr.dot(si.n, d) > 0.0, -si.n, si.n)
         albedo = dr.mean(mi.Spectrum(si.bsdf().eval_diffuse_reflectance(si, on_object)), axis=0)
         length = dr.select(on_object, si.t, length)
         h_end = dr.select(on_object, geometry.altitude(p + length * d), h_end)
-        return length, on_ground | on_object, h_end, on_object, normal, albedo
+        return PathSegment(length, on_ground | on_object, h_end, on_object, normal, albedo)
 
     def _majorant_stretch(self, p, d, length, h, h_end):
         """How far along the segment (length ``length``, altitudes ``h`` at its start and ``h_end``
@@ -600,28 +669,22 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         p, h, misses = self._enter_atmosphere(origin, d, active)
         direct = dr.select(misses, e_sun * self._solar_disk(d), direct)
 
+        # -- the path: its vertex p (altitude h), direction d, throughput, scattering events so far
         throughput = channels.zeros() + 1.0
         alive = mi.Bool(active) & ~misses
         depth = mi.UInt32(0)
-        remaining, hits_surface, h_end, hits_object, object_normal, object_albedo = self._segment(p, d, h)
+        segment = self._segment(p, d, h)
+        shadow = ShadowRay(mi.Bool(False), mi.Point3f(p), mi.Float(h), mi.Vector3f(d), mi.Float(0.0),
+                           channels.zeros(), channels.zeros(), mi.UInt32(0))
 
-        # -- the shadow ray in flight (one at a time per lane) ----------------------------------
-        in_shadow = mi.Bool(False)
-        q = mi.Point3f(p)
-        omega = mi.Vector3f(d)
-        q_remaining = mi.Float(0.0)
-        hq = mi.Float(h)
-        transmittance = channels.zeros()
-        pending = channels.zeros()         # throughput x response x E_sun of the vertex
-        pending_order = mi.UInt32(0)
-
-        while dr.hint(alive | in_shadow, label="atmosphere path"):
+        while dr.hint(alive | shadow.active, label="atmosphere path"):
             # -- one tracking step along the current ray (the shadow ray if one is in flight) ----
-            x = dr.select(in_shadow, q, p)
-            w = dr.select(in_shadow, omega, d)
-            length = dr.select(in_shadow, q_remaining, remaining)
-            hx = dr.select(in_shadow, hq, h)
-            hx_end = dr.select(in_shadow, geometry.H, h_end)
+            in_shadow = shadow.active
+            x = dr.select(in_shadow, shadow.point, p)
+            w = dr.select(in_shadow, shadow.direction, d)
+            length = dr.select(in_shadow, shadow.remaining, segment.remaining)
+            hx = dr.select(in_shadow, shadow.altitude, h)
+            hx_end = dr.select(in_shadow, geometry.H, segment.h_end)
             # The majorant holds over the next *stretch* of the segment only: as far as the ray
             # descends by ``majorant_drop``. A ray coming down from high up would otherwise
             # track thin air with the extinction at the ground (from 1000 km, through a
@@ -647,25 +710,25 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
 
             # -- shadow ray: ratio tracking; file the contribution when it leaves -------------------
             shadow_step = in_shadow & collides
-            transmittance = dr.select(shadow_step, transmittance * dr.maximum(1.0 - sigma_t / majorant, 0.0),
-                                      transmittance)
+            transmittance = dr.select(shadow_step, shadow.transmittance * dr.maximum(1.0 - sigma_t / majorant, 0.0),
+                                      shadow.transmittance)
             # Russian roulette on faint shadow rays (grazing rays at twilight cross tens of
             # optical depths): continue with probability max T / SHADOW_ROULETTE, reweighted.
             faint = shadow_step & (dr.max(transmittance, axis=0) < SHADOW_ROULETTE)
             survival = dr.detach(dr.max(transmittance, axis=0)) / SHADOW_ROULETTE
             survives = sampler.next_1d() < survival
-            transmittance = dr.select(faint, dr.select(survives, transmittance / survival, 0.0), transmittance)
+            shadow.transmittance = dr.select(faint, dr.select(survives, transmittance / survival, 0.0), transmittance)
             shadow_moves = shadow_step | (in_shadow & stretch_done)
-            q = dr.select(shadow_moves, x, q)
-            hq = dr.select(shadow_moves, hx, hq)
-            q_remaining = dr.select(shadow_moves, q_remaining - t, q_remaining)
-            shadow_done = in_shadow & ((~collides & ~stretch_done) | (dr.max(transmittance, axis=0) <= 0.0))
-            contribution = pending * transmittance
-            single = dr.select(shadow_done & (pending_order == 1), single + contribution, single)
-            double = dr.select(shadow_done & (pending_order == 2), double + contribution, double)
-            higher = dr.select(shadow_done & (pending_order >= 3), higher + contribution, higher)
+            shadow.point = dr.select(shadow_moves, x, shadow.point)
+            shadow.altitude = dr.select(shadow_moves, hx, shadow.altitude)
+            shadow.remaining = dr.select(shadow_moves, shadow.remaining - t, shadow.remaining)
+            shadow_done = in_shadow & ((~collides & ~stretch_done) | (dr.max(shadow.transmittance, axis=0) <= 0.0))
+            contribution = shadow.pending * shadow.transmittance
+            single = dr.select(shadow_done & (shadow.order == 1), single + contribution, single)
+            double = dr.select(shadow_done & (shadow.order == 2), double + contribution, double)
+            higher = dr.select(shadow_done & (shadow.order >= 3), higher + contribution, higher)
             tracking_path = alive & ~in_shadow
-            in_shadow &= ~shadow_done
+            shadow.active = in_shadow & ~shadow_done
 
             # -- path: a tentative collision in the air ----------------------------------------------
             candidate = collides & tracking_path
@@ -673,7 +736,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             reaches_end = tracking_path & ~candidate & ~stretch_done
             p = dr.select(candidate | moves_on, x, p)
             h = dr.select(candidate | moves_on, hx, h)
-            remaining = dr.select(candidate | moves_on, remaining - t, remaining)
+            segment.remaining = dr.select(candidate | moves_on, segment.remaining - t, segment.remaining)
             # Next-event estimation at *every* candidate point, weighted by the expected value of
             # the real-scattering branch: P_s * (w sigma_s / (mu P_s)) = w sigma_s / mu, with mu
             # the candidates' rate. The event decision below then only decides how the path goes on.
@@ -691,17 +754,17 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             throughput = dr.select(is_null, throughput * null_weight / (majorant * (1.0 - p_scatter)), throughput)
 
             # -- path: the segment ends on the ground (a Lambertian vertex) or in space -----------
-            p = dr.select(reaches_end, p + remaining * d, p)
-            h = dr.select(reaches_end, h_end, h)
-            on_ground = reaches_end & hits_surface
-            escapes = reaches_end & ~hits_surface
+            p = dr.select(reaches_end, p + segment.remaining * d, p)
+            h = dr.select(reaches_end, segment.h_end, h)
+            on_ground = reaches_end & segment.on_surface
+            escapes = reaches_end & ~segment.on_surface
             direct = dr.select(escapes & (depth == 0), direct + throughput * e_sun * self._solar_disk(d), direct)
             alive &= ~escapes
             # A surface vertex: the planet's ground, or an object (normal offset: no self-hits).
-            on_object = on_ground & hits_object
-            up = dr.select(on_object, object_normal, geometry.up(p))
+            on_object = on_ground & segment.on_object
+            up = dr.select(on_object, segment.object_normal, geometry.up(p))
             p = dr.select(on_object, p + up * (OBJECT_OFFSET * (1.0 + dr.max(dr.abs(p)))), p)
-            albedo = dr.select(on_object, channels.zeros() + object_albedo, channels.albedo)
+            albedo = dr.select(on_object, channels.zeros() + segment.object_albedo, channels.albedo)
             reflected_sunlight = throughput * albedo * (dr.maximum(dr.dot(up, sun_direction), 0.0) / math.pi)
 
             # -- start the shadow ray of this step's next-event estimate -----------------------------
@@ -711,14 +774,14 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             visible = estimate & (geometry.distance_to_ground(p, sun_direction, h) == dr.inf)
             if dr.hint(self.objects is not None, mode="scalar"):
                 visible &= ~self.objects.ray_test(mi.Ray3f(p, sun_direction), visible)
-            in_shadow |= visible
-            q = dr.select(visible, p, q)
-            hq = dr.select(visible, h, hq)
-            omega = dr.select(visible, sun_direction, omega)
-            q_remaining = dr.select(visible, geometry.distance_to_top(p, sun_direction, h), q_remaining)
-            transmittance = dr.select(visible, 1.0, transmittance)
-            pending = dr.select(visible, sunlight, pending)
-            pending_order = dr.select(visible, depth + 1, pending_order)
+            shadow.active |= visible
+            shadow.point = dr.select(visible, p, shadow.point)
+            shadow.altitude = dr.select(visible, h, shadow.altitude)
+            shadow.direction = dr.select(visible, sun_direction, shadow.direction)
+            shadow.remaining = dr.select(visible, geometry.distance_to_top(p, sun_direction, h), shadow.remaining)
+            shadow.transmittance = dr.select(visible, 1.0, shadow.transmittance)
+            shadow.pending = dr.select(visible, sunlight, shadow.pending)
+            shadow.order = dr.select(visible, depth + 1, shadow.order)
             vertex = scatters | on_ground
             depth = dr.select(vertex, depth + 1, depth)
 
@@ -731,13 +794,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             throughput = dr.select(scatters, throughput * optics.phase(parts, sigma_s, mu) / pdf, throughput)
             throughput = dr.select(on_ground, throughput * albedo, throughput)
             d = dr.select(scatters, d_air, dr.select(on_ground, d_ground, d))
-            segment = self._segment(p, d, h)
-            remaining = dr.select(vertex, segment[0], remaining)
-            hits_surface = dr.select(vertex, segment[1], hits_surface)
-            h_end = dr.select(vertex, segment[2], h_end)
-            hits_object = dr.select(vertex, segment[3], hits_object)
-            object_normal = dr.select(vertex, segment[4], object_normal)
-            object_albedo = dr.select(vertex, segment[5], object_albedo)
+            segment = dr.select(vertex, self._segment(p, d, h), segment)
 
             # -- Russian roulette and termination ------------------------------------------------
             survival = dr.minimum(dr.max(dr.detach(throughput), axis=0), 0.95)
