@@ -17,9 +17,10 @@ Scenes with objects use delta tracking.
 
 The delta-tracking estimator, per camera sample:
 
-* **Wavelengths.** A path carries K channels (indices into the wavelength grid of N values;
-  by default K = N, all of them): channel k takes index (j + k floor(N/K)) mod N with j uniform,
-  so every wavelength is carried with probability K/N and the image estimate divides by that.
+* **Wavelengths.** A path carries K channels (indices into the wavelength grid of N values):
+  by default K = N, all of them in grid order; with fewer, channel k takes index
+  (j + k floor(N/K)) mod N with j uniform, so every wavelength is carried with probability K/N
+  and the image estimate divides by that.
 * **Free flights: spectral tracking** (Kutz et al. 2017) against a *grey* majorant (the largest
   extinction over the channels; per-channel majorants bias and inflate variance, docs/design.md).
   The majorant is the extinction at the lowest point of the next stretch of the segment (as far
