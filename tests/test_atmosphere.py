@@ -13,7 +13,7 @@ import skyref.atmosphere as sa
 from skyref.atmosphere import (Absorber, Aerosol, Atmosphere, CornetteShanks, ExponentialProfile,
                                HenyeyGreenstein, PiecewiseLinearProfile, Rayleigh, TabulatedPhase,
                                TabulatedProfile, TabulatedSpectrum)
-from skyref.atmosphere.phase import (cornette_shanks_asymmetry, cornette_shanks_phase,
+from skyref.atmosphere.phase import (RayleighPhase, cornette_shanks_asymmetry, cornette_shanks_phase,
                                      henyey_greenstein_phase, rayleigh_phase)
 
 # --- independent reference model of the Bruneton 2017 atmosphere -----------------------------
@@ -377,3 +377,16 @@ def test_with_constituent_and_without():
     assert replaced["aerosol"].angstrom_beta == 0.1
     with pytest.raises(KeyError, match="ozone"):
         atm.without("ozone").without("ozone")
+
+
+@pytest.mark.parametrize("phase", [RayleighPhase(), CornetteShanks(0.8), HenyeyGreenstein(0.6), HenyeyGreenstein(-0.3),
+                                   TabulatedPhase((-1.0, 0.0, 1.0), (0.5, 1.0, 3.0))])
+def test_each_phase_function_samples_its_own_sampling_density(phase):
+    """sample_cosine inverts the CDF of pdf (each class's own pair): 2 pi integral_-1^mu pdf
+    equals u to 1e-6, and pdf integrates to 1 over the sphere (NumPy namespace)."""
+    mu = np.linspace(-1.0, 1.0, 200_001)
+    pdf = phase.pdf(mu)
+    cdf = np.concatenate([[0.0], np.cumsum(0.5 * (pdf[1:] + pdf[:-1]) * np.diff(mu))]) * 2.0 * np.pi
+    assert cdf[-1] == pytest.approx(1.0, abs=1e-6)
+    u = np.linspace(0.001, 0.999, 999)
+    assert np.allclose(np.interp(phase.sample_cosine(u), mu, cdf), u, atol=1e-6)

@@ -1,9 +1,22 @@
 """Phase functions p(mu), normalised so that the integral over the sphere is 1 (units sr^-1).
 
 mu = cos(theta) is the cosine of the scattering angle between the incident propagation
-direction and the scattered direction (mu = 1: forward). Evaluation takes an array namespace
-``xp`` (see :mod:`skyref.atmosphere.profiles`); ``g`` may be an array of that namespace so that
-gradients with respect to it flow.
+direction and the scattered direction (mu = 1: forward). Each phase function is one class with
+its kernels, written against an array namespace ``xp`` (NumPy, or Dr.Jit in the path tracer,
+see :mod:`skyref.atmosphere.profiles`):
+
+- ``evaluate(mu, xp)``: p(mu);
+- ``sample_cosine(u, xp)``: mu drawn from the function's *sampling density* for u uniform in
+  [0, 1) (Rayleigh and Henyey–Greenstein exactly; Cornette–Shanks and tabulated functions
+  through a Henyey–Greenstein density, the difference carried by the weight p / pdf);
+- ``pdf(mu, xp)``: that sampling density, sr^-1.
+
+Keyword arguments override the function's own parameters with arrays of the namespace (``g``
+as a Dr.Jit value, so that gradients with respect to it flow; a tabulated function's
+``cosines`` and ``values`` as device tables).
+
+References: Henyey & Greenstein, ApJ 93 (1941); W. M. Cornette and J. G. Shanks, "Physically
+reasonable analytic expression for the single-scattering phase function", Appl. Opt. 31 (1992).
 """
 
 from __future__ import annotations
@@ -41,6 +54,22 @@ def henyey_greenstein_phase(mu, g, xp=np):
     return INV_4PI * (1.0 - g2) / (denom * xp.sqrt(denom))
 
 
+def sample_rayleigh_cosine(u, xp=np):
+    """Invert the Rayleigh CDF F(mu) = (mu^3 + 3 mu + 4) / 8 exactly (Cardano): with
+    v = 4u - 2 and B = cbrt(|v| + sqrt(v^2 + 1)), mu = sign(v) (B - 1/B)."""
+    v = 4.0 * u - 2.0
+    b = xp.cbrt(xp.abs(v) + xp.sqrt(v * v + 1.0))
+    return xp.clip(xp.copysign(b - 1.0 / b, v), -1.0, 1.0)
+
+
+def sample_henyey_greenstein_cosine(u, g, xp=np):
+    """Invert the Henyey–Greenstein CDF: mu = (1 + g^2 - ((1 - g^2) / (1 - g + 2 g u))^2) / (2g),
+    and mu = 2u - 1 for |g| < 1e-3."""
+    sq = (1.0 - g * g) / (1.0 - g + 2.0 * g * u)
+    mu = (1.0 + g * g - sq * sq) / (2.0 * g)
+    return xp.clip(xp.where(xp.abs(g) < 1e-3, 2.0 * u - 1.0, mu), -1.0, 1.0)
+
+
 def cornette_shanks_asymmetry(g: float) -> float:
     """Asymmetry parameter <mu> of the Cornette–Shanks function with parameter g:
     3 g (4 + g^2) / (5 (2 + g^2))."""
@@ -48,10 +77,24 @@ def cornette_shanks_asymmetry(g: float) -> float:
 
 
 class PhaseFunction:
+    """Base class (module docstring). Subclasses sampled through Henyey–Greenstein set
+    :attr:`sampling_g`."""
+
     kind: str = ""
 
-    def evaluate(self, mu, xp=np):
+    def evaluate(self, mu, xp=np, **parameters):
         raise NotImplementedError
+
+    @property
+    def sampling_g(self) -> float:
+        """The Henyey–Greenstein parameter of the sampling density."""
+        raise NotImplementedError
+
+    def sample_cosine(self, u, xp=np, g=None):
+        return sample_henyey_greenstein_cosine(u, self.sampling_g if g is None else g, xp)
+
+    def pdf(self, mu, xp=np, g=None):
+        return henyey_greenstein_phase(mu, self.sampling_g if g is None else g, xp)
 
     def to_dict(self) -> dict:
         raise NotImplementedError
@@ -64,6 +107,12 @@ class RayleighPhase(PhaseFunction):
     kind = "rayleigh"
 
     def evaluate(self, mu, xp=np):
+        return rayleigh_phase(mu, xp)
+
+    def sample_cosine(self, u, xp=np):
+        return sample_rayleigh_cosine(u, xp)
+
+    def pdf(self, mu, xp=np):
         return rayleigh_phase(mu, xp)
 
     @property
@@ -84,8 +133,12 @@ class CornetteShanks(PhaseFunction):
     def __post_init__(self):
         check_number("g", self.g, -1.0, 1.0, lo_open=True, hi_open=True)
 
-    def evaluate(self, mu, xp=np):
-        return cornette_shanks_phase(mu, self.g, xp)
+    def evaluate(self, mu, xp=np, g=None):
+        return cornette_shanks_phase(mu, self.g if g is None else g, xp)
+
+    @property
+    def sampling_g(self) -> float:
+        return self.g
 
     @property
     def asymmetry(self) -> float:
@@ -105,8 +158,12 @@ class HenyeyGreenstein(PhaseFunction):
     def __post_init__(self):
         check_number("g", self.g, -1.0, 1.0, lo_open=True, hi_open=True)
 
-    def evaluate(self, mu, xp=np):
-        return henyey_greenstein_phase(mu, self.g, xp)
+    def evaluate(self, mu, xp=np, g=None):
+        return henyey_greenstein_phase(mu, self.g if g is None else g, xp)
+
+    @property
+    def sampling_g(self) -> float:
+        return self.g
 
     @property
     def asymmetry(self) -> float:
@@ -138,8 +195,13 @@ class TabulatedPhase(PhaseFunction):
         object.__setattr__(self, "cosines", tuple(float(x) for x in mu))
         object.__setattr__(self, "values", tuple(float(x) / norm for x in p))
 
-    def evaluate(self, mu, xp=np):
-        return np.interp(mu, self.cosines, self.values)
+    def evaluate(self, mu, xp=np, cosines=None, values=None):
+        return xp.interp(mu, self.cosines if cosines is None else cosines, self.values if values is None else values)
+
+    @property
+    def sampling_g(self) -> float:
+        """Henyey–Greenstein with the table's asymmetry parameter, kept within [-0.95, 0.95]."""
+        return float(np.clip(self.asymmetry, -0.95, 0.95))
 
     @property
     def asymmetry(self) -> float:

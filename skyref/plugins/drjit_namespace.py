@@ -18,6 +18,20 @@ class DrJitNamespace:
     maximum = staticmethod(dr.maximum)
     clip = staticmethod(dr.clip)
     where = staticmethod(dr.select)
+    abs = staticmethod(dr.abs)
+    cbrt = staticmethod(dr.cbrt)
+    copysign = staticmethod(dr.copysign)
+
+    @staticmethod
+    def interp(x, xs, ys):
+        """np.interp for a Float ``x`` and device tables ``xs`` (increasing) and ``ys``: linear
+        between the bracketing entries, clamped to the ends."""
+        table = type(xs)
+        n = dr.width(xs)
+        i = dr.binary_search(0, n - 2, lambda j: dr.gather(table, xs, j + 1) < x)
+        x0, x1 = dr.gather(table, xs, i), dr.gather(table, xs, i + 1)
+        y0, y1 = dr.gather(table, ys, i), dr.gather(table, ys, i + 1)
+        return dr.lerp(y0, y1, dr.clip((x - x0) / (x1 - x0), 0.0, 1.0))
 
 
 xp = DrJitNamespace()

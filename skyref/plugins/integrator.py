@@ -67,11 +67,10 @@ import numpy as np
 
 from skyref.plugins.geometry import PlaneParallelSlab, SphericalShell
 from skyref.plugins.line_integral import LineIntegral, grey_sum
-from skyref.atmosphere.phase import henyey_greenstein_phase
+from skyref.atmosphere.phase import henyey_greenstein_phase, sample_henyey_greenstein_cosine
 from skyref.atmosphere.sun import SUN_ANGULAR_RADIUS_DEG, SunDisk
 from skyref.plugins.drjit_namespace import xp
-from skyref.plugins.optics import (AtmosphereOptics, atmosphere_from_property, direction_with_cosine,
-                                   sample_henyey_greenstein_cosine)
+from skyref.plugins.optics import AtmosphereOptics, atmosphere_from_property, direction_with_cosine
 from skyref.plugins.quadrature import panel_levels
 from skyref.plugins.sobol import ScrambledSobolSampler, hash_combine
 from skyref.plugins.sun_optical_depth import SunOpticalDepth
@@ -273,8 +272,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             peaked = component.phase_kind != "rayleigh"
             depths[peaked] = depths.get(peaked, 0.0) + float(constituent.scattering_coefficient(middle)[0] * column)
             if peaked:
-                peaks.append(component.sampling_g if component.phase_kind == "tabulated"
-                             else float(dr.detach(component.params["g"])[0]))
+                peaks.append(constituent.phase.sampling_g)
         total = sum(depths.values())
         g = max(peaks, default=0.0)
         if g <= 0.0 or total <= 0.0:
@@ -642,7 +640,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         u_component = dr.select(lobe, 0.0, (u_choice - beta) / (1.0 - beta))
         mu_phase, _ = optics.sample_phase(parts, sigma_s, u_component, u_direction.x)
         towards_sun = direction_with_cosine(self.sun.direction, sample_henyey_greenstein_cosine(
-            u_direction.x, self.sun_lobe_g), u_direction.y)
+            u_direction.x, self.sun_lobe_g, xp), u_direction.y)
         direction = dr.select(lobe, towards_sun, direction_with_cosine(d, mu_phase, u_direction.y))
         mu = dr.clip(dr.dot(d, direction), -1.0, 1.0)
         pdf = ((1.0 - beta) * optics.phase_pdf(parts, sigma_s, mu)

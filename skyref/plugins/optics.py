@@ -31,7 +31,6 @@ import mitsuba as mi
 import numpy as np
 
 from skyref.atmosphere import Atmosphere, preset
-from skyref.atmosphere import phase as phase_model
 from skyref.atmosphere.constituents import angstrom_extinction
 from skyref.atmosphere.spectra import DOBSON_UNIT_PER_M2, ConstantSpectrum
 from skyref.plugins.drjit_namespace import xp
@@ -75,7 +74,7 @@ class ConstituentOptics:
                 self.column_m = constituent.profile.column()
             else:
                 self.tables["extinction"] = mi.Float(constituent.extinction(wavelengths_nm).astype(np.float32))
-            if constituent.phase.kind in ("cornette_shanks", "henyey_greenstein"):
+            if hasattr(constituent.phase, "g"):          # a differentiable phase parameter
                 self.params["g"] = _opaque(constituent.phase.g)
         elif self.kind == "absorber":
             self.tables["cross_section_per_du"] = mi.Float(
@@ -85,10 +84,9 @@ class ConstituentOptics:
             if constituent.column_du is not None:
                 self.params["column_du"] = _opaque(constituent.column_du)
         self.phase_kind = constituent.phase.kind if constituent.phase is not None else None
-        if self.phase_kind == "tabulated":
+        if hasattr(constituent.phase, "cosines"):       # a tabulated phase function's device tables
             self.tables["phase_cosines"] = mi.Float(np.asarray(constituent.phase.cosines, np.float32))
             self.tables["phase_values"] = mi.Float(np.asarray(constituent.phase.values, np.float32))
-            self.sampling_g = float(np.clip(constituent.phase.asymmetry, -0.95, 0.95))
 
     # --- coefficients at relative density 1, per channel ----------------------------------------
 
@@ -117,52 +115,29 @@ class ConstituentOptics:
 
     def phase(self, mu):
         """p(mu), sr^-1, mu = cosine between incident and scattered propagation directions."""
-        if self.phase_kind == "rayleigh":
-            return phase_model.rayleigh_phase(mu, xp)
-        if self.phase_kind == "cornette_shanks":
-            return phase_model.cornette_shanks_phase(mu, self.params["g"], xp)
-        if self.phase_kind == "henyey_greenstein":
-            return phase_model.henyey_greenstein_phase(mu, self.params["g"], xp)
-        cosines, values = self.tables["phase_cosines"], self.tables["phase_values"]
-        n = dr.width(cosines)
-        i = dr.binary_search(0, n - 2, lambda j: dr.gather(mi.Float, cosines, j + 1) < mu)
-        x0, x1 = dr.gather(mi.Float, cosines, i), dr.gather(mi.Float, cosines, i + 1)
-        y0, y1 = dr.gather(mi.Float, values, i), dr.gather(mi.Float, values, i + 1)
-        return dr.lerp(y0, y1, dr.clip((mu - x0) / (x1 - x0), 0.0, 1.0))
+        return self.model.phase.evaluate(mu, xp, **self.phase_parameters())
 
     def sample_cosine(self, u):
-        """Sample mu for this component's *sampling* density; return (mu, pdf(mu) in sr^-1).
-        Rayleigh and Henyey–Greenstein are sampled exactly; Cornette–Shanks and tabulated phases
-        through Henyey–Greenstein, the difference being carried by the weight p / pdf."""
-        if self.phase_kind == "rayleigh":
-            mu = sample_rayleigh_cosine(u)
-            return mu, phase_model.rayleigh_phase(mu, xp)
-        g = dr.detach(self.params["g"]) if "g" in self.params else self.sampling_g
-        mu = sample_henyey_greenstein_cosine(u, g)
-        return mu, phase_model.henyey_greenstein_phase(mu, g, xp)
+        """Sample mu from this component's sampling density; return (mu, pdf(mu) in sr^-1)."""
+        mu = self.model.phase.sample_cosine(u, xp, **self.sampling_parameters())
+        return mu, self.sampling_pdf(mu)
 
     def sampling_pdf(self, mu):
-        if self.phase_kind == "rayleigh":
-            return phase_model.rayleigh_phase(mu, xp)
-        g = dr.detach(self.params["g"]) if "g" in self.params else self.sampling_g
-        return phase_model.henyey_greenstein_phase(mu, g, xp)
+        return self.model.phase.pdf(mu, xp, **self.sampling_parameters())
 
+    def phase_parameters(self) -> dict:
+        """The phase function's parameters as device values: a differentiable ``g``, or a
+        tabulated function's tables; none for Rayleigh."""
+        if "g" in self.params:
+            return {"g": self.params["g"]}
+        if "phase_cosines" in self.tables:
+            return {"cosines": self.tables["phase_cosines"], "values": self.tables["phase_values"]}
+        return {}
 
-def sample_rayleigh_cosine(u):
-    """Invert the Rayleigh CDF F(mu) = (mu^3 + 3 mu + 4) / 8 exactly (Cardano): with
-    v = 4u - 2 and B = cbrt(|v| + sqrt(v^2 + 1)), mu = sign(v) (B - 1/B)."""
-    v = 4.0 * u - 2.0
-    b = dr.cbrt(dr.abs(v) + dr.sqrt(v * v + 1.0))
-    return dr.clip(dr.copysign(b - dr.rcp(b), v), -1.0, 1.0)
-
-
-def sample_henyey_greenstein_cosine(u, g):
-    """Invert the Henyey–Greenstein CDF: mu = (1 + g^2 - ((1 - g^2) / (1 - g + 2 g u))^2) / (2g),
-    and mu = 2u - 1 for |g| < 1e-3."""
-    g = mi.Float(g)
-    sq = (1.0 - g * g) / (1.0 - g + 2.0 * g * u)
-    mu = (1.0 + g * g - sq * sq) / (2.0 * g)
-    return dr.clip(dr.select(dr.abs(g) < 1e-3, 2.0 * u - 1.0, mu), -1.0, 1.0)
+    def sampling_parameters(self) -> dict:
+        """The sampling density's parameters: ``g`` detached (sampling decisions carry no
+        derivatives); a tabulated function samples with its own fixed ``sampling_g``."""
+        return {"g": dr.detach(self.params["g"])} if "g" in self.params else {}
 
 
 class AtmosphereOptics:
