@@ -102,8 +102,9 @@ def _batch_command(grid_path):
 
 
 def _markers(directory):
+    """The finished skies' markers (not a marker being written: a hidden temporary file)."""
     folder = os.path.join(directory, "markers")
-    return sorted(os.listdir(folder)) if os.path.isdir(folder) else []
+    return sorted(n for n in os.listdir(folder) if not n.startswith(".")) if os.path.isdir(folder) else []
 
 
 def test_kill_9_then_resume_equals_an_uninterrupted_run(tmp_path):
@@ -138,6 +139,7 @@ def test_kill_9_then_resume_equals_an_uninterrupted_run(tmp_path):
         assert open(os.path.join(killed_dir, "markers", name)).read() == text
     # ... every sky exists exactly once, no temporary files are left ...
     assert _markers(killed_dir) == _markers(clean_dir) == [f"sky-{i}.json" for i in range(8)]
+    assert sorted(os.listdir(os.path.join(killed_dir, "markers"))) == _markers(killed_dir)
     assert sorted(os.listdir(os.path.join(killed_dir, "skies"))) == [f"sky-{i}.exr" for i in range(8)]
     manifest = json.load(open(os.path.join(killed_dir, "manifest.json")))
     assert manifest["skies_finished"] == manifest["skies_total"] == 8
