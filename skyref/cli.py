@@ -2,6 +2,11 @@
 
 Every subcommand checks its input first; a bad input ends the program with exit status 2 and
 one line that names the problem (no traceback).
+
+A few imports stay inside the subcommands that need them, so that ``skyref --help`` and
+``skyref validate`` stay fast: Mitsuba and Dr.Jit (``info``; they must also follow
+:func:`skyref._llvm.configure_libllvm`) and the audit modules that import colour-science, about
+2.5 s (``audit``, ``report``).
 """
 
 from __future__ import annotations
@@ -9,11 +14,32 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import tomllib
+import zipfile
 
 import numpy as np
 
+import skyref
+from skyref import _llvm
+from skyref.analytic import MODELS, analytic_model
+from skyref.analytic import REGISTRY as MODEL_REGISTRY
+from skyref.atmosphere import PRESETS
+from skyref.audit.advise import advice_lines, load_map, parse_tolerance
+from skyref.audit.speed_map import ENTRIES, TRUTH_GRID, entry_summary, evaluate_map, fitted_entries, truth_skies
+from skyref.batch import load_grid, run_batch
 from skyref.errors import ParameterError, SkyrefSetupError
+from skyref.fit.cli import add_fit_parser
+from skyref.invert.cli import add_invert_parser
+from skyref.io.exr import write_sky_exr
+from skyref.io.png import write_png
+from skyref.lut import METHODS, lut_method, method_class
+from skyref.lut import REGISTRY as LUT_REGISTRY
+from skyref.render import render_sky
+from skyref.scene import load_scene
 from skyref.validation import check_int, check_output_directory, check_output_file, safe_file_name
+
+__all__ = ["build_parser", "cmd_advise", "cmd_audit", "cmd_batch", "cmd_info", "cmd_render", "cmd_report",
+           "cmd_validate", "main"]
 
 
 def _describe_scene(scene) -> str:
@@ -46,8 +72,6 @@ def _describe_scene(scene) -> str:
 
 
 def cmd_validate(args) -> int:
-    from skyref.scene import load_scene
-
     for path in args.scenes:
         scene = load_scene(path, report=None if args.quiet else print)
         print(f"{path}: valid")
@@ -57,17 +81,13 @@ def cmd_validate(args) -> int:
 
 
 def cmd_info(args) -> int:
-    import skyref
-    from skyref import _llvm
-    from skyref.atmosphere import PRESETS
-
     print(f"skyref       {skyref.__version__}")
     print(f"python       {sys.version.split()[0]}")
     libllvm = _llvm.working_library()
     print(f"libLLVM      {libllvm or 'none that works: ' + _llvm.INSTALL_HINT}")
     if libllvm:
         _llvm.configure_libllvm()
-        import drjit
+        import drjit  # lazy: see the module docstring
         import mitsuba
 
         print(f"mitsuba      {mitsuba.__version__}, drjit {drjit.__version__}")
@@ -78,11 +98,6 @@ def cmd_info(args) -> int:
 
 
 def cmd_render(args) -> int:
-    from skyref.io.exr import write_sky_exr
-    from skyref.io.png import write_png
-    from skyref.render import render_sky
-    from skyref.scene import load_scene
-
     check_output_file(args.output, ".exr", "--output")
     if args.png:
         check_output_file(args.png, ".png", "--png")
@@ -103,8 +118,6 @@ def cmd_render(args) -> int:
 
 
 def cmd_batch(args) -> int:
-    from skyref.batch import load_grid, run_batch
-
     grid = load_grid(args.grid)
     if args.dry_run:
         grid.validate()
@@ -120,8 +133,6 @@ def cmd_batch(args) -> int:
 
 def _option_value(text: str):
     """``NAME=VALUE`` -> (NAME, VALUE parsed as a TOML value, else the string)."""
-    import tomllib
-
     name, sep, value = text.partition("=")
     if not sep or not name:
         raise ParameterError("--option", text, "NAME=VALUE, e.g. scattering_orders=8", "not NAME=VALUE")
@@ -133,8 +144,6 @@ def _option_value(text: str):
 
 def _load_tables(path: str) -> dict:
     """The arrays of an ``--tables`` .npz file; a ParameterError naming ``--tables`` otherwise."""
-    import zipfile
-
     if not os.path.isfile(path):
         raise ParameterError("--tables", path, "an existing .npz file", "file not found")
     try:
@@ -146,12 +155,7 @@ def _load_tables(path: str) -> dict:
 
 
 def cmd_audit(args) -> int:
-    from skyref.analytic import MODELS, analytic_model
-    from skyref.analytic import REGISTRY as MODEL_REGISTRY
-    from skyref.audit.audit import audit, summary_table, write_report
-    from skyref.lut import METHODS, lut_method, method_class
-    from skyref.lut import REGISTRY as LUT_REGISTRY
-    from skyref.scene import load_scene
+    from skyref.audit.audit import audit, summary_table, write_report  # lazy: see the module docstring
 
     if args.method not in METHODS and args.method not in MODELS:
         raise ParameterError("--method", args.method, ", ".join([*METHODS, *MODELS]), "unknown method")
@@ -184,9 +188,7 @@ def cmd_audit(args) -> int:
 
 
 def cmd_report(args) -> int:
-    from skyref.audit.map_report import write_map_report
-    from skyref.audit.speed_map import ENTRIES, entry_summary, evaluate_map, fitted_entries, truth_skies
-    from skyref.batch import load_grid, run_batch
+    from skyref.audit.map_report import write_map_report  # lazy: see the module docstring
 
     grid = load_grid(args.truth_grid)
     log = (lambda *_: None) if args.quiet else print
@@ -204,9 +206,6 @@ def cmd_report(args) -> int:
 
 
 def cmd_advise(args) -> int:
-    from skyref.audit.advise import advice_lines, load_map, parse_tolerance
-    from skyref.scene import load_scene
-
     tolerance = parse_tolerance(args.tolerance)
     directions = check_int("--directions", args.directions, 1, 1 << 40)
     frames = check_int("--frames", args.frames, 1, 1 << 30)
@@ -262,8 +261,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-q", "--quiet", action="store_true", help="no progress messages")
     p.set_defaults(run=cmd_audit)
 
-    from skyref.audit.speed_map import TRUTH_GRID
-
     p = sub.add_parser("report", help="the speed-vs-error map of every method: results/README.md, plots, map.json")
     p.add_argument("--truth-grid", default=TRUTH_GRID, help="grid of the ground-truth skies")
     p.add_argument("--coefficients", default=os.path.join("out", "hosek-coefficients"),
@@ -281,12 +278,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--frames", type=int, default=1, help="frames with the same atmosphere (precompute paid once)")
     p.set_defaults(run=cmd_advise)
 
-    from skyref.fit.cli import add_fit_parser
-
     add_fit_parser(sub)
-
-    from skyref.invert.cli import add_invert_parser
-
     add_invert_parser(sub)
 
     p = sub.add_parser("info", help="versions, libLLVM, Mitsuba variants, presets")

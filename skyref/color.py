@@ -14,6 +14,10 @@ import functools
 import colour
 import numpy as np
 
+__all__ = ["SPARSE_GRID_POINTS", "xyz_matrix", "spectral_to_xyz", "spectral_to_luminance", "xyz_to_linear_srgb",
+           "linear_srgb_to_xyz", "spectral_to_linear_srgb", "srgb_luminance", "default_exposure", "tonemap_srgb8",
+           "ciede2000"]
+
 #: Wavelength grids with fewer points than this are treated as sparse samples of a smooth
 #: spectrum (see :func:`spectral_to_xyz`).
 SPARSE_GRID_POINTS = 8

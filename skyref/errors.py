@@ -4,6 +4,8 @@ Every invalid value is reported *before* any work starts, with the parameter's n
 value that was given and the range that would have been accepted.
 """
 
+__all__ = ["MAX_ECHO", "ParameterError", "SkyrefSetupError"]
+
 
 #: Longest echo of a value in an error message, characters.
 MAX_ECHO = 200

@@ -22,6 +22,9 @@ import math
 
 import numpy as np
 
+__all__ = ["equirectangular_direction", "equirectangular_pixel", "fisheye_direction", "fisheye_pixel",
+           "perspective_direction", "camera_to_world", "pixel_directions", "solid_angle"]
+
 #: Sub-samples per pixel side for the fisheye's numerical solid angle.
 _FISHEYE_SUBSAMPLES = 8
 

@@ -3,9 +3,8 @@
 The samples per pixel are split into ``passes`` independent batches; the sky is their mean and
 its standard error the spread of the batch means / sqrt(passes) (16 batches by default: with 4,
 the standard error has 3 degrees of freedom and 7-10% of estimates fall beyond 3 sigma). All
-batches are traced together, in launches of at most :data:`MAX_WAVEFRONT` samples so memory
-stays bounded (each launch re-traces the integrator's Python code: fewer, larger launches pay
-that once).
+batches are traced together, in launches whose size the integrator bounds
+(:meth:`~skyref.plugins.integrator.AtmosphereIntegrator.launch_sizes`).
 """
 
 from __future__ import annotations
@@ -15,13 +14,18 @@ import time
 
 import numpy as np
 
+from tqdm import tqdm
+
 from skyref import __version__
 from skyref.errors import ParameterError
+from skyref.plugins import load_mitsuba
+from skyref.projection import camera_to_world, pixel_directions
+from skyref.scene import RenderSettings
 from skyref.sky import ORDER_NAMES, Sky
 from skyref.validation import check_choice
 
-#: Most samples traced at once (bounds memory: ~100 bytes of state per sample and channel).
-MAX_WAVEFRONT = 1 << 21
+__all__ = ["MAX_IMAGE_VALUES", "GEOMETRIES", "sensor_dict", "build_integrator", "check_image_size", "render_sky",
+           "relative_error_percentile", "combine_skies", "render_to_error"]
 
 #: Most values (passes x pixels x scattering orders x wavelengths) one render accumulates: each
 #: takes ~12 bytes across the device buffer and its host copies, so this is ~13 GB.
@@ -33,9 +37,7 @@ GEOMETRIES = ("spherical", "plane_parallel")
 def sensor_dict(camera) -> dict:
     """The Mitsuba sensor for a :class:`~skyref.scene.Camera` (observer at the origin of the
     east-north-up frame): skyref's ``equirectangular`` / ``fisheye`` or stock ``perspective``."""
-    import mitsuba as mi
-
-    from skyref.projection import camera_to_world
+    import mitsuba as mi  # lazy: Mitsuba is loaded by skyref.plugins.load_mitsuba (libLLVM first)
 
     sensor = {"type": camera.type,
               "to_world": mi.ScalarTransform4f(camera_to_world(camera).tolist()),
@@ -53,7 +55,7 @@ def build_integrator(scene, geometry: str = "spherical", wavelengths_per_path: i
     """An ``atmosphere`` integrator configured for ``scene`` (Mitsuba must be loaded), with the
     ``estimator`` ``delta_tracking`` or ``line_integral`` (experimental; default: the
     integrator's ``DEFAULT_ESTIMATOR``)."""
-    import mitsuba as mi
+    import mitsuba as mi  # lazy: Mitsuba and its plugins are loaded by skyref.plugins.load_mitsuba
 
     from skyref.plugins.integrator import AtmosphereIntegrator
 
@@ -78,16 +80,6 @@ def check_image_size(scene, passes: int) -> None:
                              "covering parts of the view), or with fewer passes or wavelengths")
 
 
-def _chunks(spp: int, pixels: int) -> list[int]:
-    """Split ``spp`` samples per pixel (per batch, for all batches at once) into chunks of at
-    most MAX_WAVEFRONT samples (``pixels`` counts every batch's)."""
-    per_chunk = max(1, min(spp, MAX_WAVEFRONT // max(pixels, 1)))
-    sizes = [per_chunk] * (spp // per_chunk)
-    if spp % per_chunk:
-        sizes.append(spp % per_chunk)
-    return sizes
-
-
 def render_sky(scene, spp: int | None = None, passes: int | None = None, seed: int | None = None,
                variant: str | None = None, geometry: str = "spherical", wavelengths_per_path: int = 0,
                progress: bool = False, estimator: str | None = None) -> Sky:
@@ -99,10 +91,6 @@ def render_sky(scene, spp: int | None = None, passes: int | None = None, seed: i
     planet (for comparisons with plane-parallel solvers such as DISORT); ``estimator`` picks
     the integrator's estimator (see :data:`skyref.plugins.integrator.ESTIMATORS`).
     """
-    from skyref.plugins import load_mitsuba
-    from skyref.projection import pixel_directions
-    from skyref.scene import RenderSettings
-
     check_choice("geometry", geometry, GEOMETRIES)
     scene.check_files()
     settings = RenderSettings(spp=scene.render.spp if spp is None else spp,
@@ -125,26 +113,15 @@ def render_sky(scene, spp: int | None = None, passes: int | None = None, seed: i
             raise ParameterError("objects", [item.filename or item.type for item in scene.objects],
                                  "shapes Mitsuba can load", str(exc).strip().splitlines()[0][:200]) from None
     camera = scene.camera
-    chunks = _chunks(spp_per_pass, camera.width * camera.height * settings.passes)
 
     bar = None
     if progress:
-        from tqdm import tqdm
-
         bar = tqdm(total=settings.passes * spp_per_pass, unit="spp", desc=f"render {scene.name or 'sky'}")
     start = time.perf_counter()
-    per_pass = None
-    done = 0
-    for chunk_spp in chunks:
-        # Each launch continues the samples' sequences where the one before stopped.
-        image = integrator.render_orders(sensor, seed=settings.seed % (1 << 32), spp=chunk_spp,
-                                         pixel_centres=settings.pixel_sampling == "centre",
-                                         batches=settings.passes, sample_offset=done).numpy()
-        done += chunk_spp
-        per_pass = image * chunk_spp if per_pass is None else per_pass + image * chunk_spp
-        if bar is not None:
-            bar.update(chunk_spp * settings.passes)
-    per_pass /= spp_per_pass                          # (P, H, W, orders, N)
+    per_pass = integrator.render_orders(                 # (P, H, W, orders, N)
+        sensor, seed=settings.seed % (1 << 32), spp=spp_per_pass, pixel_centres=settings.pixel_sampling == "centre",
+        batches=settings.passes,
+        progress=None if bar is None else (lambda count: bar.update(count * settings.passes))).numpy()
     elapsed = time.perf_counter() - start
     if bar is not None:
         bar.close()

@@ -20,11 +20,17 @@ import tomllib
 from dataclasses import dataclass, field
 
 import numpy as np
+import tomli_w
 
 from skyref.atmosphere import Atmosphere, from_turbidity, preset, wavelength_grid
 from skyref.atmosphere.sun import SUN_ANGULAR_RADIUS_DEG, SunDisk
 from skyref.validation import check_array, check_choice, check_fields, check_number
 from skyref.errors import ParameterError
+from skyref.io.atomic import atomic_write
+
+__all__ = ["direction_from_angles", "Sun", "Observer", "CAMERA_TYPES", "Camera", "PIXEL_SAMPLING", "RenderSettings",
+           "OBJECT_TYPES", "SceneObject", "MAX_NAME_LENGTH", "MAX_WAVELENGTHS", "Scene", "atmosphere_from_scene_dict",
+           "defaulted_tables", "load_scene", "save_scene"]
 
 
 
@@ -69,7 +75,7 @@ class Sun:
     def at(cls, time, latitude_deg: float, longitude_deg: float, altitude_m: float = 0.0, **kwargs) -> "Sun":
         """The sun's position for a time (timezone-aware datetime or ISO 8601 string with an
         offset; naive times are taken as UTC) at a place (degrees north, degrees east)."""
-        import pandas as pd
+        import pandas as pd  # lazy: pandas and pvlib take ~2 s to import; only Sun.at needs them
         import pvlib
 
         check_number("sun.latitude_deg", latitude_deg, -90.0, 90.0)
@@ -237,7 +243,7 @@ class SceneObject:
             raise ParameterError("objects.scale_m", self.scale_m, "three positive numbers", "not positive")
 
     def mitsuba_dict(self) -> dict:
-        import mitsuba as mi
+        import mitsuba as mi  # lazy: Mitsuba's start-up cost; loaded through skyref.plugins.load_mitsuba
 
         shape = {"type": self.type,
                  "to_world": mi.ScalarTransform4f().translate(list(self.translate_m)).scale(list(self.scale_m)),
@@ -419,9 +425,5 @@ def load_scene(path, report=None) -> Scene:
 
 def save_scene(scene: Scene, path) -> None:
     """Write the scene, fully resolved (no preset), atomically."""
-    import tomli_w
-
-    from skyref.io.atomic import atomic_write
-
     with atomic_write(path, "wb") as f:
         tomli_w.dump(scene.to_dict(), f)

@@ -11,6 +11,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+__all__ = ["ORDER_NAMES", "TIMING_METADATA", "Sky"]
+
 #: Names of the per-order layers: the sun seen directly (through the atmosphere), light
 #: scattered once, twice, and three or more times (a ground reflection counts as a scattering).
 ORDER_NAMES = ("sun_direct", "single", "double", "higher")
@@ -42,12 +44,12 @@ class Sky:
 
     def rgb(self) -> np.ndarray:
         """Linear sRGB, absolute: R = G = B = Y in cd m^-2 for D65 white (see skyref.color)."""
-        from skyref.color import spectral_to_linear_srgb
+        from skyref.color import spectral_to_linear_srgb  # lazy: colour-science takes ~3 s to import
 
         return spectral_to_linear_srgb(self.radiance, self.wavelengths_nm)
 
     def luminance(self) -> np.ndarray:
         """Luminance, cd m^-2."""
-        from skyref.color import spectral_to_luminance
+        from skyref.color import spectral_to_luminance  # lazy: colour-science's import cost
 
         return spectral_to_luminance(self.radiance, self.wavelengths_nm)

@@ -17,6 +17,8 @@ import time
 from skyref.validation import check_choice, check_view
 from skyref.errors import ParameterError
 
+__all__ = ["Registry", "SkyMethod"]
+
 
 class Registry:
     """Sky methods by name: ``entries`` maps name -> (module, class name); classes are imported

@@ -12,6 +12,7 @@ parameter, the value given and the valid range.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import re
@@ -71,8 +72,6 @@ def check_array(name: str, values, lo: float = -math.inf, hi: float = math.inf,
 def check_fields(section: str, fields: dict, cls) -> dict:
     """Return ``fields`` if they fit the dataclass ``cls``: every key is one of its init fields
     and every field without a default is present; else raise naming ``section.key``."""
-    import dataclasses
-
     init = [f for f in dataclasses.fields(cls) if f.init]
     names = [f.name for f in init]
     for key in fields:

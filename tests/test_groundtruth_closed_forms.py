@@ -201,7 +201,7 @@ def test_vertical_transmittance(mi, rayleigh_scale):
     integ = build(mi, m, 0.0, 0.0, max_depth=1)   # max_depth 1: order 0 is all that is read
     spp = 20_000 if rayleigh_scale == 1.0 else 120_000
     x = render(integ, [[0.0, 0.0, 1.0]], spp=spp, seeds=range(32))[:, 0, 0, :]
-    t, se = mean_se(x / (solar(WL) / integ.sun.solid_angle))
+    t, se = mean_se(x / (solar(WL) / integ.sun.disk.solid_angle_sr))
     check(t, se, np.exp(-m.tau_vertical(0.0, Z_TOP)), label=f"vertical T (rayleigh x{rayleigh_scale})")
 
 
@@ -220,7 +220,7 @@ def test_slant_transmittance_spherical(mi):
     assert np.all(tau < m.tau_vertical(0.0, Z_TOP) / mu) and np.all(tau > 0.99 * m.tau_vertical(0.0, Z_TOP) / mu)
     integ = build(mi, m, 60.0, 135.0, max_depth=1)
     x = render(integ, [direction(60.0, 135.0)], spp=20_000, seeds=range(32))[:, 0, 0, :]
-    t, se = mean_se(x / (solar(WL) / integ.sun.solid_angle))
+    t, se = mean_se(x / (solar(WL) / integ.sun.disk.solid_angle_sr))
     check(t, se, np.exp(-tau), label="slant T")
 
 

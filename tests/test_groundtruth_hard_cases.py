@@ -214,7 +214,7 @@ def test_extreme_constituents(mi, case, sun_zenith):
         # above: nothing scatters its light back)
         sky_views = d[:-1, 2] > 0.0
         assert np.all(out[:-1][sky_views] == 0.0)
-        assert np.allclose(out[-1, 0], solar_irradiance(WL) / integ.sun.solid_angle, rtol=1e-5)
+        assert np.allclose(out[-1, 0], solar_irradiance(WL) / integ.sun.disk.solid_angle_sr, rtol=1e-5)
         assert np.all(out[-1, 1:] == 0.0)
         # the ground, looking down, is lit by the sun: single = albedo/pi E mu0 (no air). mu0 varies
         # over the solar disk by +-0.27 deg x tan(zenith) (+-0.3% at 30 deg, +-5% at 85 deg), and

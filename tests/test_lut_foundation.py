@@ -248,7 +248,7 @@ def test_transmittance_matches_the_path_tracer(mi, sun_zenith, spp):
     integ = build_integrator(scene)
     view = direction_from_angles(sun_zenith, 180.0)[None, :]
     samples = np.stack([integ.render_directions(view, seed=s, spp=spp).numpy()[0, 0] for s in range(32)])
-    transmittance = samples / (solar_irradiance(WL) / integ.sun.solid_angle)
+    transmittance = samples / (solar_irradiance(WL) / integ.sun.disk.solid_angle_sr)
     estimate, se = transmittance.mean(axis=0), transmittance.std(axis=0, ddof=1) / math.sqrt(32)
     table = TransmittanceTable(optics_of(mi, atmosphere))
     mu = math.cos(math.radians(sun_zenith))

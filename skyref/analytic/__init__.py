@@ -17,6 +17,8 @@ from __future__ import annotations
 
 from skyref.sky_method import Registry
 
+__all__ = ["REGISTRY", "MODELS", "model_class", "analytic_model"]
+
 #: Every analytic sky model by name.
 REGISTRY = Registry("model", {"preetham1999": ("skyref.analytic.preetham", "Preetham1999"),
                               "hoffman_preetham2002": ("skyref.analytic.hoffman_preetham", "HoffmanPreetham2002"),

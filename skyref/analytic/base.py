@@ -28,6 +28,11 @@ from skyref.atmosphere.spectra import solar_irradiance, wavelength_grid
 from skyref.errors import ParameterError
 from skyref.sky_method import SkyMethod
 
+__all__ = ["Component", "components", "exponential_components", "per_component", "phase_values", "sphere_distances",
+           "hits_ground", "Segment", "atmosphere_segment", "radius_along_ray", "altitude_along_ray",
+           "zenith_cosine_along_ray", "sun_cosine_along_ray", "column_along_rays", "one_minus_exp_over",
+           "AnalyticModel"]
+
 
 # --- the atmosphere as the models see it -------------------------------------------------------
 

@@ -37,6 +37,13 @@ How skyref puts it on a spherical :class:`~skyref.atmosphere.Atmosphere` (what t
 
 Validity: meant for observers near the ground (constant density); it stays finite and
 non-negative for every observer and sun (the sky is black where the planet shadows the observer).
+
+References
+----------
+N. Hoffman, A. J. Preetham, "Rendering Outdoor Light Scattering in Real Time", Game Developers
+Conference 2002.
+
+L. G. Henyey, J. L. Greenstein, "Diffuse radiation in the Galaxy", ApJ 93, 1941.
 """
 
 from __future__ import annotations
@@ -49,6 +56,8 @@ from skyref.analytic.base import (AnalyticModel, Component, atmosphere_segment, 
                                   altitude_along_ray, one_minus_exp_over, phase_values,
                                   sphere_distances, sun_cosine_along_ray, zenith_cosine_along_ray)
 from skyref.atmosphere.phase import HenyeyGreenstein
+
+__all__ = ["henyey_greenstein_aerosols", "HoffmanPreetham2002"]
 
 
 def henyey_greenstein_aerosols(items: list[Component]) -> list[Component]:

@@ -45,6 +45,13 @@ is the bare formula.
 
 The same layout and interpolation carry the 5-coefficient Perez form (:func:`perez_f`), which
 :mod:`skyref.fit` fits as a Preetham-style baseline; :data:`FORMS` names both.
+
+References
+----------
+L. Hosek, A. Wilkie, "An Analytic Model for Full Spectral Sky-Dome Radiance", ACM TOG 31(4), 2012.
+
+R. Perez, R. Seals, J. Michalsky, "All-weather model for sky luminance distribution — preliminary
+configuration and validation", Solar Energy 50(3), 1993.
 """
 
 from __future__ import annotations
@@ -57,6 +64,12 @@ from importlib import resources
 import numpy as np
 
 from skyref.errors import ParameterError
+
+__all__ = ["BAND_CENTRES_NM", "TURBIDITIES", "ALBEDOS", "CONTROL_POINTS", "COEFFICIENTS", "PEREZ_COEFFICIENTS",
+           "CHANNELS", "UNITS", "HORIZON_OFFSET", "PEREZ_MIN_COS_THETA", "hosek_f", "perez_f", "FORMS",
+           "elevation_parameter", "bezier_weights", "configuration_weights", "interpolate_configuration",
+           "check_configuration", "check_view", "array_names", "CoefficientTable", "published_arrays",
+           "published_table"]
 
 #: Centres of the published model's 40 nm bands, nm.
 BAND_CENTRES_NM = tuple(float(w) for w in range(320, 721, 40))

@@ -14,6 +14,10 @@ How an atmosphere becomes the model's configuration:
 Wavelengths: the spectral table gives 11 bands centred at 320, 360, ..., 720 nm, interpolated
 linearly between the centres as the reference code does. Above 720 nm (where CIE luminance
 weights are below 1% of their peak) skyref holds the 720 nm value; below 320 nm it refuses.
+
+References
+----------
+L. Hosek, A. Wilkie, "An Analytic Model for Full Spectral Sky-Dome Radiance", ACM TOG 31(4), 2012.
 """
 
 from __future__ import annotations
@@ -25,6 +29,8 @@ from skyref.analytic.hosek import BAND_CENTRES_NM, TURBIDITIES, published_table
 from skyref.atmosphere import turbidity as atmosphere_turbidity
 from skyref.validation import check_number
 from skyref.errors import ParameterError
+
+__all__ = ["ALBEDO_WAVELENGTH_NM", "MAX_OBSERVER_ALTITUDE_M", "HosekWilkie2012"]
 
 #: Wavelength at which the atmosphere's ground albedo is read, nm.
 ALBEDO_WAVELENGTH_NM = 550.0

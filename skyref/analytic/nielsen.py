@@ -34,12 +34,22 @@ What skyref derives where the thesis' description is incomplete:
 
 Validity: any observer altitude (aircraft to space) and sun position; finite and non-negative
 everywhere.
+
+References
+----------
+R. S. Nielsen, "Real Time Rendering of Atmospheric Scattering Effects for Flight Simulators", MSc
+thesis, Technical University of Denmark, 2003.
+
+N. Hoffman, A. J. Preetham, "Rendering Outdoor Light Scattering in Real Time", Game Developers
+Conference 2002.
 """
 
 from __future__ import annotations
 
 from skyref.analytic.base import Component, altitude_along_ray, exponential_components, one_minus_exp_over
 from skyref.analytic.hoffman_preetham import HoffmanPreetham2002
+
+__all__ = ["Nielsen2003"]
 
 
 class Nielsen2003(HoffmanPreetham2002):

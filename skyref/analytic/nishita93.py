@@ -37,6 +37,11 @@ horizontal ray lie tens of km apart (turbidity 6, 1 degree above the horizon: +4
 +120% at 440 nm with 64 shells, +12% to +37% with 128).
 
 Validity: any observer (ground, aircraft, space) and any sun position; finite and non-negative.
+
+References
+----------
+T. Nishita, T. Sirai, K. Tadamura, E. Nakamae, "Display of the Earth Taking into Account Atmospheric
+Scattering", SIGGRAPH 93, 1993.
 """
 
 from __future__ import annotations
@@ -47,6 +52,8 @@ from skyref.analytic.base import (AnalyticModel, altitude_along_ray, atmosphere_
                                   column_along_rays, components, hits_ground, per_component,
                                   phase_values, radius_along_ray, sphere_distances, sun_cosine_along_ray)
 from skyref.validation import check_number
+
+__all__ = ["CHUNK_ELEMENTS", "Nishita1993"]
 
 #: Work per chunk of view rays (samples x wavelengths x rays), to bound memory.
 CHUNK_ELEMENTS = 1 << 21

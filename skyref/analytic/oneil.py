@@ -43,6 +43,13 @@ on as the planet's shadow, and rays below the horizontal from an aircraft).
 
 Constituents: exponential profiles; absorbers with other profiles (the ozone tent) are ignored
 (``options["ignored_constituents"]``). Validity: any observer and sun; finite and non-negative.
+
+References
+----------
+S. O'Neil, "Accurate Atmospheric Scattering", GPU Gems 2, chapter 16, Addison-Wesley, 2005.
+
+T. Nishita, T. Sirai, K. Tadamura, E. Nakamae, "Display of the Earth Taking into Account Atmospheric
+Scattering", SIGGRAPH 93, 1993.
 """
 
 from __future__ import annotations
@@ -55,6 +62,9 @@ from skyref.analytic.base import (AnalyticModel, altitude_along_ray, atmosphere_
                                   zenith_cosine_along_ray)
 from skyref.validation import check_choice, check_number
 from skyref.errors import ParameterError
+
+__all__ = ["PUBLISHED_SCALE_COEFFICIENTS", "PUBLISHED_SCALE_DEPTH", "PUBLISHED_THICKNESS_RATIO", "MAX_LOG_SCALE",
+           "SCALE_FUNCTIONS", "ONeil2005"]
 
 #: O'Neil's fitted coefficients c0..c4 of log(scale / H) in x = 1 - cos theta.
 PUBLISHED_SCALE_COEFFICIENTS = (-0.00287, 0.459, 3.83, -6.80, 5.25)

@@ -44,6 +44,21 @@ directions below the horizon return NaN (as LUT methods without a ground model d
 On skyref's atmospheres T comes from :func:`skyref.atmosphere.turbidity` (aerosol + Rayleigh
 optical depth over Rayleigh's, at 550 nm); skyref's clear preset has T = 1.05, outside the fit, so
 ``turbidity=`` may set the value used instead (e.g. 2, the clearest sky the fit covers).
+
+References
+----------
+A. J. Preetham, P. Shirley, B. Smits, "A Practical Analytic Model for Daylight", SIGGRAPH 99, 1999.
+
+R. Perez, R. Seals, J. Michalsky, "All-weather model for sky luminance distribution — preliminary
+configuration and validation", Solar Energy 50(3), 1993.
+
+D. B. Judd, D. L. MacAdam, G. Wyszecki, "Spectral Distribution of Typical Daylight as a Function of
+Correlated Color Temperature", JOSA 54(8), 1964 (the daylight basis S0, S1, S2).
+
+F. Kasten, "A new table and approximation formula for the relative optical air mass", Arch. Meteorol.
+Geophys. Bioklimatol. B 14, 1966.
+
+M. Iqbal, "An Introduction to Solar Radiation", Academic Press, 1983 (the absorption tables).
 """
 
 from __future__ import annotations
@@ -51,6 +66,7 @@ from __future__ import annotations
 import functools
 
 import numpy as np
+from colour.colorimetry import SDS_BASIS_FUNCTIONS_CIE_ILLUMINANT_D_SERIES
 
 from skyref.analytic.base import AnalyticModel
 from skyref.analytic.hosek import perez_f
@@ -58,6 +74,11 @@ from skyref.atmosphere.presets import turbidity as atmosphere_turbidity
 from skyref.validation import check_number
 from skyref.color import xyz_matrix
 from skyref.errors import ParameterError
+
+__all__ = ["TURBIDITY_RANGE", "MAX_OBSERVER_ALTITUDE_M", "DAYLIGHT_BASIS_RANGE_NM", "PEREZ_LUMINANCE", "PEREZ_X",
+           "PEREZ_Y", "ZENITH_X", "ZENITH_Y", "OZONE_K", "MIXED_GAS_K", "WATER_VAPOUR_K", "WATER_VAPOUR_CM",
+           "PAPER_OZONE_CM", "perez_coefficients", "zenith_luminance", "zenith_chromaticity", "daylight_weights",
+           "daylight_basis", "daylight_basis_grid", "solar_transmittance", "Preetham1999"]
 
 #: Turbidities the paper's fits cover.
 TURBIDITY_RANGE = (2.0, 10.0)
@@ -129,8 +150,7 @@ def daylight_weights(x, y):
 
 @functools.lru_cache(maxsize=1)
 def _daylight_basis_table() -> tuple[np.ndarray, np.ndarray]:
-    from colour.colorimetry import SDS_BASIS_FUNCTIONS_CIE_ILLUMINANT_D_SERIES as basis
-
+    basis = SDS_BASIS_FUNCTIONS_CIE_ILLUMINANT_D_SERIES
     wl = np.asarray(basis["S0"].wavelengths, dtype=np.float64)
     return wl, np.stack([np.asarray(basis[k].values, dtype=np.float64) for k in ("S0", "S1", "S2")])
 

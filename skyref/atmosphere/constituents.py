@@ -26,6 +26,9 @@ from skyref.atmosphere.spectra import (DOBSON_UNIT_PER_M2, PowerLawSpectrum, Spe
 from skyref.validation import check_choice, check_number
 from skyref.errors import ParameterError
 
+__all__ = ["RAYLEIGH_SCATTERING_AT_1UM", "MAX_DENSITY_SCALE", "Constituent", "Rayleigh", "Aerosol",
+           "angstrom_extinction", "Absorber", "CONSTITUENT_TYPES", "constituent_from_dict"]
+
 #: Rayleigh scattering coefficient of sea-level air at 1 um (Bruneton 2017), m^-1; it scales
 #: as lambda^-4.
 RAYLEIGH_SCATTERING_AT_1UM = 1.24062e-6

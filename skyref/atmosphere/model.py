@@ -18,6 +18,8 @@ from skyref.atmosphere.spectra import Spectrum, as_spectrum
 from skyref.validation import check_number
 from skyref.errors import ParameterError
 
+__all__ = ["RADIUS_RANGE_M", "Atmosphere"]
+
 #: Accepted planet radii, m (a 1 km asteroid up to a gas-giant-sized body).
 RADIUS_RANGE_M = (1.0e3, 1.0e8)
 

@@ -15,8 +15,12 @@ Keyword arguments override the function's own parameters with arrays of the name
 as a Dr.Jit value, so that gradients with respect to it flow; a tabulated function's
 ``cosines`` and ``values`` as device tables).
 
-References: Henyey & Greenstein, ApJ 93 (1941); W. M. Cornette and J. G. Shanks, "Physically
-reasonable analytic expression for the single-scattering phase function", Appl. Opt. 31 (1992).
+References
+----------
+L. G. Henyey and J. L. Greenstein, "Diffuse radiation in the Galaxy", ApJ 93 (1941).
+
+W. M. Cornette and J. G. Shanks, "Physically reasonable analytic expression for the
+single-scattering phase function", Appl. Opt. 31(16) (1992).
 """
 
 from __future__ import annotations
@@ -26,8 +30,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from skyref.validation import check_array, check_number
+from skyref.validation import check_array, check_choice, check_fields, check_number
 from skyref.errors import ParameterError
+
+__all__ = ["rayleigh_phase", "cornette_shanks_phase", "henyey_greenstein_phase", "sample_rayleigh_cosine",
+           "sample_henyey_greenstein_cosine", "cornette_shanks_asymmetry", "PhaseFunction", "RayleighPhase",
+           "CornetteShanks", "HenyeyGreenstein", "TabulatedPhase", "PHASE_TYPES", "phase_from_dict"]
 
 INV_4PI = 1.0 / (4.0 * math.pi)
 
@@ -217,8 +225,6 @@ PHASE_TYPES = {cls.kind: cls for cls in (RayleighPhase, CornetteShanks, HenyeyGr
 
 
 def phase_from_dict(data: dict) -> PhaseFunction:
-    from skyref.validation import check_choice, check_fields
-
     fields = dict(data)
     kind = check_choice("phase.type", fields.pop("type", None), tuple(PHASE_TYPES))
     check_fields("phase", fields, PHASE_TYPES[kind])

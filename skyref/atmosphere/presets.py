@@ -3,6 +3,20 @@
 All presets share the conventions of docs/design.md: planet radius 6360 km, Rayleigh
 1.24062e-6 m^-1 (lambda / 1 um)^-4 with an 8 km scale height, aerosol with a 1.2 km scale
 height, ozone as a 10–25–40 km tent.
+
+References
+----------
+E. Bruneton, "Precomputed Atmospheric Scattering: a New Implementation", 2017,
+https://ebruneton.github.io/precomputed_atmospheric_scattering/ (the demo's atmosphere).
+
+S. Hillaire, "A Scalable and Production Ready Sky and Atmosphere Rendering Technique", Computer
+Graphics Forum 39(4) (Proc. EGSR 2020), 2020.
+
+E. Bruneton, "A Qualitative and Quantitative Evaluation of 8 Clear Sky Models", IEEE TVCG 23(12), 2017
+(published online 2016).
+
+A. J. Preetham, P. Shirley, B. Smits, "A Practical Analytic Model for Daylight", SIGGRAPH 99, 1999
+(turbidity).
 """
 
 from __future__ import annotations
@@ -11,6 +25,9 @@ from skyref.atmosphere.constituents import Absorber, Aerosol, Rayleigh
 from skyref.atmosphere.model import Atmosphere
 from skyref.atmosphere.phase import CornetteShanks
 from skyref.validation import check_choice, check_number
+
+__all__ = ["TURBIDITY_WAVELENGTH_NM", "bruneton2017", "hillaire2020", "bruneton2016_measured", "rayleigh_only",
+           "rayleigh_optical_depth", "from_turbidity", "turbidity", "PRESETS", "preset"]
 
 #: Reference wavelength of turbidity, nm.
 TURBIDITY_WAVELENGTH_NM = 550.0

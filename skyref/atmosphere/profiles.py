@@ -20,8 +20,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from skyref.validation import check_array, check_number
+from skyref.validation import check_array, check_choice, check_fields, check_number
 from skyref.errors import ParameterError
+
+__all__ = ["MAX_ALTITUDE_M", "EXPONENTIAL_PANEL_SCALE_HEIGHTS", "DensityProfile", "ExponentialProfile",
+           "PiecewiseLinearProfile", "TabulatedProfile", "PROFILE_TYPES", "profile_from_dict"]
 
 #: Largest altitude any profile accepts, m (well above any atmosphere top we model).
 MAX_ALTITUDE_M = 1.0e7
@@ -210,8 +213,6 @@ PROFILE_TYPES = {cls.kind: cls for cls in (ExponentialProfile, PiecewiseLinearPr
 
 def profile_from_dict(data: dict) -> DensityProfile:
     """Inverse of ``DensityProfile.to_dict``."""
-    from skyref.validation import check_choice, check_fields
-
     fields = dict(data)
     kind = check_choice("profile.type", fields.pop("type", None), tuple(PROFILE_TYPES))
     cls = PROFILE_TYPES[kind]

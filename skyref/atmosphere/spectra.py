@@ -3,6 +3,17 @@
 Conventions: wavelengths in nm (vacuum); scattering/absorption coefficients in m^-1; cross
 sections in m^2 per molecule; solar spectral irradiance in W m^-2 nm^-1 at the top of the
 atmosphere, perpendicular to the beam.
+
+References
+----------
+ASTM G173-03, "Standard Tables for Reference Solar Spectral Irradiances: Direct Normal and
+Hemispherical on 37° Tilted Surface", ASTM International, 2003 (extraterrestrial column, via pvlib).
+
+A. Serdyuchenko, V. Gorshelev, M. Weber, W. Chehade, J. P. Burrows, "High spectral resolution ozone
+absorption cross-sections — Part 2: Temperature dependence", Atmos. Meas. Tech. 7, 2014.
+
+E. Bruneton, "Precomputed Atmospheric Scattering: a New Implementation", 2017,
+https://ebruneton.github.io/precomputed_atmospheric_scattering/ (the 10 nm bins).
 """
 
 from __future__ import annotations
@@ -16,6 +27,10 @@ import numpy as np
 
 from skyref.validation import check_array, check_fields, check_number
 from skyref.errors import ParameterError
+
+__all__ = ["DOBSON_UNIT_PER_M2", "RGB_WAVELENGTHS_NM", "LUMINANCE_WAVELENGTHS_NM", "WAVELENGTH_LIMITS_NM",
+           "MAX_GRID_WAVELENGTHS", "Spectrum", "ConstantSpectrum", "PowerLawSpectrum", "TabulatedSpectrum", "power_law",
+           "as_spectrum", "ozone_cross_section", "solar_irradiance", "wavelength_grid"]
 
 #: Molecules per m^2 in one Dobson unit (0.01 mm of pure gas at 273.15 K and 1 atm).
 DOBSON_UNIT_PER_M2 = 2.6867e20
@@ -167,7 +182,7 @@ def ozone_cross_section() -> TabulatedSpectrum:
 
 @functools.lru_cache(maxsize=1)
 def _astm_g173_extraterrestrial() -> tuple[np.ndarray, np.ndarray]:
-    import pvlib  # imported here: only the sun needs it
+    import pvlib  # lazy: pvlib (with pandas) takes ~2 s to import and only the sun needs it
 
     table = pvlib.spectrum.get_reference_spectra(standard="ASTM G173-03")
     return table.index.to_numpy(dtype=np.float64), table["extraterrestrial"].to_numpy(dtype=np.float64)

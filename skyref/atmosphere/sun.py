@@ -6,9 +6,13 @@ written against an array namespace ``xp`` (NumPy, or Dr.Jit in kernels).
 Units: angles in degrees in the API (radians inside), irradiance in W m^-2 nm^-1 perpendicular
 to the beam at the top of the atmosphere, solid angle in sr.
 
-References: E. Bruneton, "A qualitative and quantitative evaluation of 8 clear sky models",
-IEEE TVCG 23 (2017) (the angular radius 0.00935 / 2 rad); H. Neckel and D. Labs, "Solar limb
-darkening 1986-1990", Solar Physics 153 (1994) (the linear law's coefficient in the visible).
+References
+----------
+E. Bruneton, "A qualitative and quantitative evaluation of 8 clear sky models", IEEE TVCG 23
+(2017) (the angular radius 0.00935 / 2 rad).
+
+H. Neckel and D. Labs, "Solar limb darkening 1986-1990", Solar Physics 153 (1994) (the linear
+law's coefficient in the visible).
 """
 
 from __future__ import annotations

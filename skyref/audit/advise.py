@@ -13,8 +13,12 @@ from __future__ import annotations
 
 import json
 
+from skyref.atmosphere import turbidity
 from skyref.audit.speed_map import FRAME_DIRECTIONS, KINDS, frame_seconds
 from skyref.errors import ParameterError
+
+__all__ = ["ENTRY_KEYS", "MAX_ALTITUDE_M", "MAX_SUN_ZENITH_DEG", "advice_lines", "load_map", "parse_tolerance", "rank",
+           "scene_kind"]
 
 #: Highest observer the map's skies represent, m (its high-altitude skies are at 10 km).
 MAX_ALTITUDE_M = 20_000.0
@@ -36,8 +40,6 @@ def parse_tolerance(text: str) -> float:
 
 def scene_kind(scene) -> tuple[str, str]:
     """(kind, reason) of ``scene`` (see the module docstring)."""
-    from skyref.atmosphere import turbidity
-
     altitude = scene.observer.altitude_m
     zenith = scene.sun.zenith_deg
     if altitude > MAX_ALTITUDE_M:

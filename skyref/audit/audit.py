@@ -18,12 +18,19 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+import OpenEXR
 
 from skyref.validation import check_number
 from skyref.audit.groundtruth import ground_truth
 from skyref.audit.metrics import (DYNAMIC_RANGE, MAX_PIXEL_NOISE, METRICS, NOISE_RATIO, STATISTICS, error_maps,
                                   region_statistics)
 from skyref.audit.regions import REGIONS, region_masks
+from skyref.color import default_exposure, spectral_to_linear_srgb, tonemap_srgb8
+from skyref.errors import ParameterError
+from skyref.io.atomic import atomic_path, atomic_write
+
+__all__ = ["FINEST_TARGET", "INITIAL_TARGET", "AuditResult", "all_resolved", "audit", "compare", "summary_table",
+           "write_report"]
 
 #: Relative error target of the first ground-truth render (95th percentile of SE / radiance).
 INITIAL_TARGET = 0.02
@@ -90,8 +97,6 @@ def audit(method, scene, max_spp: int = 16384, cache_dir: str | None = None, log
     ``scene``'s atmosphere and wavelengths) against the ground truth of ``scene``."""
     check_number("max_spp", max_spp, 16, 1 << 20)
     if not np.allclose(method.wavelengths_nm, scene.wavelengths_nm):
-        from skyref.errors import ParameterError
-
         raise ParameterError("method.wavelengths_nm", list(method.wavelengths_nm),
                              f"the scene's wavelengths {list(scene.wavelengths_nm)}", "mismatch")
     # Methods give radiance along exact directions: the ground truth looks along pixel centres.
@@ -145,8 +150,6 @@ def summary_table(result: AuditResult) -> list[str]:
 def write_report(result: AuditResult, directory: str) -> str:
     """Write ``report.md``, ``summary.json``, PNG plots and ``error_maps.exr`` into
     ``directory`` (each file atomically); returns the report's path."""
-    from skyref.io.atomic import atomic_write
-
     os.makedirs(directory, exist_ok=True)
     _write_plots(result, directory)
     _write_error_exr(result, os.path.join(directory, "error_maps.exr"))
@@ -175,13 +178,11 @@ def write_report(result: AuditResult, directory: str) -> str:
 
 
 def _write_plots(result: AuditResult, directory: str):
+    # Lazy: selecting the Agg backend is a side effect, made only when plots are written.
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from skyref.color import default_exposure, spectral_to_linear_srgb, tonemap_srgb8
-    from skyref.io.atomic import atomic_path
 
     wl = result.scene.wavelengths_nm
     rgb_truth = spectral_to_linear_srgb(result.truth_radiance, wl)
@@ -214,10 +215,6 @@ def _write_plots(result: AuditResult, directory: str):
 
 def _write_error_exr(result: AuditResult, path: str):
     """Error maps as float32 EXR channels: ``<metric>`` and ``noise.<metric>``."""
-    import OpenEXR
-
-    from skyref.io.atomic import atomic_path
-
     channels = {}
     for metric in METRICS:
         channels[metric] = np.ascontiguousarray(result.maps.error[metric].astype(np.float32))

@@ -8,8 +8,11 @@ import hashlib
 import json
 import os
 
+from skyref.io.exr import read_sky_exr, write_sky_exr
 from skyref.render import render_to_error
 from skyref.validation import safe_file_name
+
+__all__ = ["ROUNDS", "cache_key", "cache_path", "ground_truth"]
 
 #: Most rendering rounds per ground truth.
 ROUNDS = 8
@@ -33,8 +36,6 @@ def ground_truth(scene, target_relative_error: float, max_spp: int, cache_dir: s
     """The scene's sky with the 95th percentile of standard error / radiance at most
     ``target_relative_error`` (or ``max_spp`` samples per pixel); read from ``cache_dir`` when
     rendered before."""
-    from skyref.io.exr import read_sky_exr, write_sky_exr
-
     path = None
     if cache_dir is not None:
         path = cache_path(cache_dir, scene, target_relative_error, max_spp)

@@ -15,7 +15,12 @@ import platform
 import numpy as np
 
 from skyref.audit.speed_map import FRAME_DIRECTIONS, KINDS, MAP_SKIES, cache_path, load_cached
+from skyref.color import default_exposure, spectral_to_linear_srgb, srgb_luminance, tonemap_srgb8
 from skyref.io.atomic import atomic_path, atomic_write
+from skyref.io.exr import read_sky_exr
+
+__all__ = ["ERROR_SCALE", "OTHER_REPORTS", "contact_entries", "map_table", "plot_contact_sheet", "plot_pareto",
+           "write_map_report"]
 
 #: Relative luminance error at the ends of the contact sheet's colour scale.
 ERROR_SCALE = 0.25
@@ -54,6 +59,7 @@ def map_table(summaries: list[dict]) -> list[str]:
 
 
 def plot_pareto(summaries: list[dict], path: str):
+    # Lazy: selecting the Agg backend is a side effect, made only when plots are written.
     import matplotlib
 
     matplotlib.use("Agg")
@@ -97,13 +103,11 @@ def contact_entries(entries) -> list:
 def plot_contact_sheet(entries, skies, cache_dir: str, path: str):
     """Rows: the ground truth, then every method's default setting; per sky two columns: the
     tone-mapped image (the truth's exposure) and the relative luminance error."""
+    # Lazy: selecting the Agg backend is a side effect, made only when plots are written.
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from skyref.color import default_exposure, spectral_to_linear_srgb, srgb_luminance, tonemap_srgb8
-    from skyref.io.exr import read_sky_exr
 
     sheet_skies = [next((s, p) for s, p in skies if s.kind == kind) for kind in KINDS]
     truths = []

@@ -29,6 +29,9 @@ import numpy as np
 from skyref.audit.regions import REGIONS
 from skyref.color import ciede2000, spectral_to_linear_srgb, xyz_matrix
 
+__all__ = ["DYNAMIC_RANGE", "MAX_PIXEL_NOISE", "METRICS", "NOISE_RATIO", "STATISTICS", "ErrorMaps", "error_maps",
+           "region_statistics"]
+
 METRICS = ("luminance", "spectral", "delta_e")
 STATISTICS = ("mean", "rms", "p95", "max")
 #: The ground truth must be this many times less noisy than the error it measures.

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+__all__ = ["ANTISOLAR_REGION_DEG", "HORIZON_BAND_DEG", "REGIONS", "SUN_REGION_DEG", "horizon_cosine", "region_masks"]
+
 #: Half-width of the horizon band around the geometric horizon, degrees.
 HORIZON_BAND_DEG = 5.0
 #: Radius of the region around the sun (the solar disk itself is excluded everywhere), degrees.

@@ -25,13 +25,27 @@ contact sheet), so the map is completed in pieces and rebuilt without recomputat
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from skyref.analytic import analytic_model
+from skyref.analytic.hosek import TURBIDITIES
+from skyref.atmosphere import turbidity
+from skyref.batch.store import sha256_of
 from skyref.errors import ParameterError
+from skyref.fit.export import read_tables
+from skyref.io.atomic import atomic_path
+from skyref.io.exr import read_sky_exr
+from skyref.lut import lut_method
+from skyref.render import render_sky
+
+__all__ = ["ENTRIES", "FRAME_DIRECTIONS", "KINDS", "MAP_SKIES", "TRUTH_GRID", "Entry", "MapSky", "PathTracerView",
+           "build_method", "cache_path", "entry_summary", "evaluate_map", "fitted_entries", "frame_seconds",
+           "load_cached", "save_cached", "truth_skies"]
 
 #: Directions of the frame the map's "frame" cost refers to (1920 x 1080).
 FRAME_DIRECTIONS = 1920 * 1080
@@ -116,17 +130,14 @@ def fitted_entries(coefficients_dir: str) -> list[Entry]:
 # --- building a method --------------------------------------------------------------------------
 
 def _clamped_turbidity(name: str, atmosphere) -> float:
-    from skyref.analytic.hosek import TURBIDITIES
+    # Lazy: skyref.analytic.preetham imports colour-science (seconds); ``skyref --help`` imports this module.
     from skyref.analytic.preetham import TURBIDITY_RANGE
-    from skyref.atmosphere import turbidity
 
     lo, hi = {"preetham1999": TURBIDITY_RANGE, "hosek2012": (TURBIDITIES[0], TURBIDITIES[-1])}[name]
     return float(np.clip(turbidity(atmosphere), lo, hi))
 
 
 def _spectral_table(path: str):
-    from skyref.fit.export import read_tables
-
     tables, _ = read_tables(path)
     if "spectral" not in tables:
         raise ParameterError("table", path, "a coefficient file with a spectral table", "no spectral table")
@@ -141,11 +152,7 @@ def build_method(entry: Entry, atmosphere, wavelengths_nm):
     if "table" in options:
         options["table"] = _spectral_table(options["table"])
     if entry.family == "LUT":
-        from skyref.lut import lut_method
-
         return lut_method(entry.method, atmosphere, wavelengths_nm, **options)
-    from skyref.analytic import analytic_model
-
     return analytic_model(entry.method, atmosphere, wavelengths_nm, **options)
 
 
@@ -155,15 +162,11 @@ class PathTracerView:
     seed ``seed``, returns radiance without the solar disk, and costs no precomputation."""
 
     def __init__(self, scene, spp: int, seed: int):
-        import dataclasses
-
         self.scene = scene.replace(render=dataclasses.replace(scene.render, pixel_sampling="centre"))
         self.spp, self.seed = spp, seed
         self.precompute_seconds = 0.0
 
     def radiance(self, directions, sun_direction, observer_altitude_m: float) -> np.ndarray:
-        from skyref.render import render_sky
-
         expected = self.scene.camera.width * self.scene.camera.height
         if len(directions) != expected:
             raise ParameterError("directions", f"{len(directions)} directions",
@@ -204,8 +207,6 @@ def _summary(found: dict) -> dict:
 def cache_path(cache_dir: str, entry: Entry, sky: MapSky) -> str:
     """The cached row of ``entry`` on ``sky``; an entry that reads a coefficient table is keyed
     by the table's content too, so a refitted table is measured again."""
-    from skyref.batch.store import sha256_of
-
     tag = f"{entry.key}__{sky.name}"
     if "table" in entry.options:
         tag += "__" + sha256_of(entry.options["table"])[:12]
@@ -214,8 +215,6 @@ def cache_path(cache_dir: str, entry: Entry, sky: MapSky) -> str:
 
 
 def save_cached(path: str, row: dict, srgb):
-    from skyref.io.atomic import atomic_path
-
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as f:
             np.savez(f, row=json.dumps(row), srgb=np.zeros((0, 0, 3), np.float32) if srgb is None else srgb)
@@ -231,9 +230,9 @@ def evaluate_map(entries, skies, cache_dir: str, log=print) -> list[dict]:
     """One row per (entry, sky): {"entry", "family", "method", "label", "sky", "kind",
     "precompute_s", "per_view_s", "lookup_s", "statistics"} or, where the method refuses the
     sky, "refused": the reason. Rows found in ``cache_dir`` are reused."""
+    # Lazy: both import colour-science (seconds), and ``skyref --help`` imports this module.
     from skyref.audit.audit import compare
     from skyref.color import spectral_to_linear_srgb
-    from skyref.io.exr import read_sky_exr
 
     os.makedirs(cache_dir, exist_ok=True)
     rows = {}

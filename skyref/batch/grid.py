@@ -49,6 +49,11 @@ import numpy as np
 
 from skyref.validation import check_choice, check_fields, check_int, check_number
 from skyref.errors import ParameterError
+from skyref.render import check_image_size
+from skyref.scene import Scene, load_scene
+
+__all__ = ["FORMATS", "AXIS_TABLES", "MAX_SPP_LIMIT", "MAX_ROUNDS", "MAX_SKIES", "MAX_AXIS_VALUES", "OutputSettings",
+           "SkySpec", "Grid", "load_grid"]
 
 FORMATS = ("spectral", "rgb")
 #: Scene tables an axis may sweep (the camera, wavelengths and render settings fix the shape
@@ -207,9 +212,6 @@ class Grid:
         """Build the base scene, the scene of every axis value (the other axes as in the base)
         and the scenes of the grid's corners; raise :class:`ParameterError` naming the base,
         the axis or the combination at fault. Returns the scene of sky 0."""
-        from skyref.render import check_image_size
-        from skyref.scene import Scene
-
         def build(coordinates, name, value):
             try:
                 scene = Scene.from_dict(self.scene_dict(coordinates))
@@ -237,8 +239,6 @@ class Grid:
 
 def load_grid(path) -> Grid:
     """Read a grid TOML file; relative paths in it are relative to the file."""
-    from skyref.scene import load_scene
-
     path = os.fspath(path)
     try:
         with open(path, "rb") as f:

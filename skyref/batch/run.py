@@ -6,6 +6,9 @@ any running dask scheduler instead (``tcp://host:8786``), so a Slurm or Kubernet
 scales the same grid out — workers then need the output directory on a shared file system.
 At most two skies per worker are in flight, so the client's memory does not grow with the
 grid. A sky that fails is reported and left unmarked; the next run retries it.
+
+dask and tqdm are imported inside the functions that use them: :mod:`skyref.batch` (and so this
+module) is imported to read and check grids too, and dask alone takes about a second to import.
 """
 
 from __future__ import annotations
@@ -18,6 +21,8 @@ from skyref.batch.grid import MAX_ROUNDS, Grid
 from skyref.batch.store import BatchStore
 from skyref.batch.worker import render_and_store
 from skyref.errors import ParameterError
+
+__all__ = ["make_task", "SCHEDULER_TIMEOUT_S", "check_workers", "local_cluster", "connect", "run_batch"]
 
 
 def make_task(grid: Grid, spec, variant, drjit_threads) -> dict:
@@ -42,7 +47,7 @@ def check_workers(workers: int | None) -> int:
 def local_cluster(workers: int | None):
     """A LocalCluster of ``workers`` single-threaded processes (default: one per two cores,
     at least one) sharing this machine's memory; returns (cluster, Dr.Jit threads per worker)."""
-    from dask.distributed import LocalCluster
+    from dask.distributed import LocalCluster  # lazy: dask takes ~1 s to import (see module docstring)
 
     workers = check_workers(workers)
     cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
@@ -53,7 +58,7 @@ def local_cluster(workers: int | None):
 def connect(scheduler: str):
     """A client of the dask scheduler at ``scheduler``; a ParameterError if none answers within
     SCHEDULER_TIMEOUT_S seconds or the address is malformed."""
-    from dask.distributed import Client
+    from dask.distributed import Client  # lazy: dask's import cost
 
     valid = "the address of a running dask scheduler, e.g. tcp://host:8786"
     try:
@@ -70,7 +75,7 @@ def run_batch(grid: Grid, scheduler: str | None = None, workers: int | None = No
     """Render every unfinished sky of ``grid``; returns the manifest (see
     :class:`skyref.batch.store.BatchStore`) plus ``failed`` (sky id -> error message) and
     ``wall_time_s``."""
-    from dask.distributed import Client
+    from dask.distributed import Client  # lazy: dask's import cost
 
     # Everything is checked, and the scheduler reached, before anything is written.
     first_scene = grid.validate()
@@ -96,7 +101,7 @@ def run_batch(grid: Grid, scheduler: str | None = None, workers: int | None = No
 
 def _run(grid, store, first_scene, client, threads, variant, verify, progress, log) -> dict:
     """The body of :func:`run_batch`, once the cluster is up."""
-    from dask.distributed import as_completed
+    from dask.distributed import as_completed  # lazy: dask's import cost
 
     with store.lock():
         store.prepare(first_scene)
@@ -109,7 +114,7 @@ def _run(grid, store, first_scene, client, threads, variant, verify, progress, l
         failed = {}
         bar = None
         if progress:
-            from tqdm import tqdm
+            from tqdm import tqdm  # lazy: tqdm's import cost, paid only with a progress bar
 
             bar = tqdm(total=len(grid), initial=done_before, unit="sky", desc="skyref batch", smoothing=0.1)
         try:

@@ -17,6 +17,9 @@ a run killed at any moment (even ``kill -9``) leaves either nothing or a complet
 the final name; the dataset region of a sky is written *before* its marker, so an unmarked
 sky's data is simply rewritten by the next run. Leftover temporary files are removed when a
 run starts; a lock file stops two runs from sharing a directory.
+
+dask, xarray and zarr are imported inside the methods that use them (seconds of start-up;
+:mod:`skyref.batch` is also imported to read and check grids, which needs none of them).
 """
 
 from __future__ import annotations
@@ -34,6 +37,8 @@ import numpy as np
 from skyref.errors import ParameterError
 from skyref.io.atomic import atomic_write
 from skyref.validation import check_output_directory
+
+__all__ = ["DATASET", "sha256_of", "BatchStore"]
 
 DATASET = "dataset.zarr"
 
@@ -104,7 +109,7 @@ class BatchStore:
     def _create_dataset(self, scene):
         """The dataset's layout, coordinates and metadata; the sky data stay unwritten (NaN)
         until each sky's worker fills its chunk."""
-        import dask.array as da
+        import dask.array as da  # lazy: see module docstring
         import xarray as xr
 
         grid = self.grid
@@ -149,7 +154,7 @@ class BatchStore:
 
     def write_region(self, index: int, values: dict):
         """Write one sky's arrays (name -> array) into its chunk of the dataset."""
-        import zarr
+        import zarr  # lazy: see module docstring
 
         group = zarr.open_group(self.dataset_path, mode="r+")
         position = tuple(int(i) for i in np.unravel_index(index, self.grid.shape))

@@ -11,22 +11,23 @@ import time
 
 import numpy as np
 
+from skyref.batch.store import BatchStore, sha256_of
+from skyref.io.exr import write_sky_exr
+from skyref.plugins import load_mitsuba
+from skyref.render import relative_error_percentile, render_sky, render_to_error
+from skyref.scene import Scene
+
+__all__ = ["render_and_store"]
+
 
 def render_and_store(task: dict) -> dict:
     """Render the sky described by ``task`` (built by :func:`skyref.batch.run.make_task`) and
     store it; returns its marker."""
-    from skyref.batch.store import BatchStore, sha256_of
-    from skyref.io.exr import write_sky_exr
-    from skyref.render import relative_error_percentile, render_sky, render_to_error
-    from skyref.scene import Scene
-
     start, start_cpu = time.perf_counter(), time.process_time()
     if task["drjit_threads"]:
-        import drjit as dr
-
-        from skyref.plugins import load_mitsuba
-
         load_mitsuba(task["variant"])
+        import drjit as dr  # lazy: only once load_mitsuba has pointed Dr.Jit at a working libLLVM
+
         dr.set_thread_count(task["drjit_threads"])
     grid, spec = task["grid"], task["sky"]
     output = grid.output

@@ -12,9 +12,14 @@ import os
 
 import numpy as np
 
+from skyref.analytic.hosek import published_table
 from skyref.errors import ParameterError
-from skyref.fit.fitter import PRIOR_WEIGHT
+from skyref.fit.export import read_tables, write_tables
+from skyref.fit.fitter import PRIOR_WEIGHT, fit_table
+from skyref.fit.training import load_batch_dataset
 from skyref.validation import check_number, check_output_directory
+
+__all__ = ["FORM_NAMES", "KINDS", "add_fit_parser", "cmd_fit", "noise_line"]
 
 KINDS = ("spectral", "xyz", "rgb")
 FORM_NAMES = {"hosek": "Hosek-Wilkie", "perez": "Perez (Preetham-style baseline)"}
@@ -62,6 +67,8 @@ def noise_line(training) -> str:
 
 
 def _summary_lines(name, table, training) -> list[str]:
+    # Lazy: skyref.fit.evaluate imports colour-science (seconds, through skyref.audit.metrics), and
+    # ``skyref --help`` imports this module.
     from skyref.fit.evaluate import error_summary
 
     summary = error_summary(table, training)
@@ -88,7 +95,7 @@ def _progress(quiet: bool):
     """A ``progress(stage, done, total)`` callback drawing one tqdm bar per stage."""
     if quiet:
         return None
-    from tqdm import tqdm
+    from tqdm import tqdm  # lazy: its import cost is paid only with a progress bar
 
     bars = {}
 
@@ -103,9 +110,6 @@ def _progress(quiet: bool):
 
 
 def _evaluate(args, training_sets) -> int:
-    from skyref.analytic.hosek import published_table
-    from skyref.fit.export import read_tables
-
     if args.evaluate == "published":
         tables = {kind: published_table(kind) for kind in KINDS}
         name = "published Hosek-Wilkie 1.4a"
@@ -123,9 +127,6 @@ def _evaluate(args, training_sets) -> int:
 
 
 def _fit(args, training_sets) -> int:
-    from skyref.fit.export import write_tables
-    from skyref.fit.fitter import fit_table
-
     if not args.out:
         raise ParameterError("--out", None, "a directory for the fitted tables", "missing (or give --evaluate)")
     check_output_directory(args.out, "--out")     # created by the first table written
@@ -161,8 +162,6 @@ def _fit(args, training_sets) -> int:
 
 def cmd_fit(args) -> int:
     """Run ``skyref fit`` (see the module's documentation)."""
-    from skyref.fit.training import load_batch_dataset
-
     if args.evaluate and args.out:
         raise ParameterError("--out", args.out, "only when fitting (without --evaluate)", "conflicting options")
     check_number("--joint-prior-weight", args.joint_prior_weight, 0.0, 1e6)

@@ -17,7 +17,10 @@ import time
 
 import numpy as np
 
+from skyref.analytic.hosek import ALBEDOS, TURBIDITIES
 from skyref.audit.metrics import _statistics
+
+__all__ = ["error_summary", "interpolation_gap", "model_radiance", "relative_errors", "throughput"]
 
 
 def model_radiance(table, training) -> np.ndarray:
@@ -57,7 +60,7 @@ def throughput(table, directions: int = 1 << 20, repeats: int = 3) -> dict:
     """Directions per second of ``table.radiance`` for one configuration (every channel), in
     NumPy (float64) and in JAX (jit-compiled, float32 on the default device); the best of
     ``repeats`` timed runs after a warm-up."""
-    import jax
+    import jax  # lazy: JAX's start-up cost, paid only when its speed is measured
     import jax.numpy as jnp
 
     rng = np.random.default_rng(0)
@@ -92,8 +95,6 @@ def interpolation_gap(table, elevations_deg=(3.0, 10.0, 30.0, 60.0), steps: int 
     Returns {"turbidity": stats, "albedo": stats} with "median" and "p95" of |gap| over a grid of
     directions above the horizon (``steps`` x 2 ``steps``), ``elevations_deg`` and every channel
     (directions where both neighbours have zero radiance are left out)."""
-    from skyref.analytic.hosek import ALBEDOS, TURBIDITIES
-
     theta, gamma = np.meshgrid(np.radians(np.linspace(0.0, 89.0, steps)), np.radians(np.linspace(2.0, 178.0, 2 * steps)))
     pairs = {"turbidity": [((low, a), (high, a)) for a in ALBEDOS for low, high in zip(TURBIDITIES[:-1], TURBIDITIES[1:])],
              "albedo": [((t, ALBEDOS[0]), (t, ALBEDOS[1])) for t in TURBIDITIES]}

@@ -20,6 +20,11 @@ written as:
   reads back exactly the float64 values.
 
 :func:`read_tables` reads ``.npz`` (ours or the published one) and ``.json`` files.
+
+References
+----------
+L. Hosek, A. Wilkie, "An Analytic Model for Full Spectral Sky-Dome Radiance", ACM TOG 31(4), 2012 (the
+coefficient layout of its reference implementation, ``ArHosekSkyModel.c`` and ``ArHosekSkyModelData_*.h``).
 """
 
 from __future__ import annotations
@@ -35,6 +40,9 @@ from skyref.analytic.hosek import (ALBEDOS, CHANNELS, FORMS, TURBIDITIES, UNITS,
                                    published_arrays)
 from skyref.errors import ParameterError
 from skyref.io.atomic import atomic_path, atomic_write
+
+__all__ = ["HEADER_NAMES", "POINTER_ARRAYS", "c_header", "default_metadata", "read_tables", "write_c_headers",
+           "write_json", "write_npz", "write_tables"]
 
 #: Published header file name of each kind of table.
 HEADER_NAMES = {"spectral": "ArHosekSkyModelData_Spectral.h", "xyz": "ArHosekSkyModelData_CIEXYZ.h",

@@ -43,6 +43,16 @@ smoothly positive where a trial step makes F negative, so the solver is pushed b
 Configurations must lie on the table's grid (albedo 0 or 1, turbidity 1..10); skies with the sun
 below the horizon are left out (the layout holds no such data). Albedo/turbidity/channel
 groups without training skies keep the start table's values (:attr:`FitResult.fitted`).
+
+JAX, optimistix and lineax are imported inside the functions that use them: their start-up takes
+seconds, and ``skyref --help`` imports this module (through :mod:`skyref.fit.cli`).
+
+References
+----------
+L. Hosek, A. Wilkie, "An Analytic Model for Full Spectral Sky-Dome Radiance", ACM TOG 31(4), 2012.
+
+R. Perez, R. Seals, J. Michalsky, "All-weather model for sky luminance distribution — preliminary
+configuration and validation", Solar Energy 50(3), 1993.
 """
 
 from __future__ import annotations
@@ -59,6 +69,9 @@ from skyref.analytic.hosek import (ALBEDOS, CONTROL_POINTS, FORMS, TURBIDITIES, 
 from skyref.validation import check_number
 from skyref.errors import ParameterError
 from skyref.fit import forms
+
+__all__ = ["ATOL", "BATCH_SIZE", "GAUGE_WEIGHT", "GRID_TOLERANCE", "MAX_STEPS", "POSITIVE_EPSILON", "PRIOR_WEIGHT",
+           "RTOL", "FitResult", "default_start", "fit_table"]
 
 #: eps of the positive part of F (see the module's documentation), relative to L_M.
 POSITIVE_EPSILON = 1e-6

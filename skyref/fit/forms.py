@@ -21,6 +21,16 @@ The Perez form is bounded the same way (B <= 0, D <= :data:`MAX_EXPONENT`).
 trade a common factor: the fitter fixes that freedom by keeping L_M the mean radiance of the sky
 (:data:`SCALE_COEFFICIENTS`). The Perez form has no such freedom ("1 + ..." fixes its scale), so
 its overall radiance is fitted.
+
+References
+----------
+F. James, "MINUIT: Function Minimization and Error Analysis, Reference Manual", CERN Program Library
+Long Writeup D506, 1994 (parameter limits).
+
+L. Hosek, A. Wilkie, "An Analytic Model for Full Spectral Sky-Dome Radiance", ACM TOG 31(4), 2012.
+
+R. Perez, R. Seals, J. Michalsky, "All-weather model for sky luminance distribution — preliminary
+configuration and validation", Solar Energy 50(3), 1993.
 """
 
 from __future__ import annotations
@@ -28,6 +38,9 @@ from __future__ import annotations
 import numpy as np
 
 from skyref.analytic.hosek import FORMS
+
+__all__ = ["BOUNDS", "BOUND_MARGIN", "MAX_CHI_G", "MAX_EXPONENT", "NEUTRAL_START", "SCALE_COEFFICIENTS",
+           "clip_into_bounds", "coefficient_bounds", "from_unbounded", "neutral_start", "scale_mask", "to_unbounded"]
 
 #: Largest exponent E (Hosek–Wilkie) or D (Perez) of exp(E gamma).
 MAX_EXPONENT = 10.0

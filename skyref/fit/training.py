@@ -18,6 +18,10 @@ ground albedo. View directions are the pixel centres of the scene's camera
 (``pixel_sampling = "centre"``). Only directions at or above the horizon are kept.
 
 :func:`synthesize` builds a training set from a coefficient table instead (tests, benchmarks).
+
+xarray and colour-science (also through :mod:`skyref.color`) are imported inside the functions
+that read a dataset: they take about 0.7 s and 2.5 s to import, and ``skyref --help`` imports this
+module (through :mod:`skyref.fit.cli`).
 """
 
 from __future__ import annotations
@@ -31,7 +35,14 @@ import numpy as np
 
 from skyref.analytic.hosek import BAND_CENTRES_NM, CHANNELS
 from skyref.errors import ParameterError
+from skyref.atmosphere import ConstantSpectrum, turbidity
 from skyref.atmosphere.sun import SUN_ANGULAR_RADIUS_DEG
+from skyref.batch.grid import Grid, OutputSettings
+from skyref.projection import pixel_directions, solid_angle
+from skyref.scene import Camera, Scene
+
+__all__ = ["SOLAR_DISK_MARGIN", "TRISTIMULUS_SPAN_NM", "TrainingSet", "load_batch_dataset", "synthesize",
+           "view_sun_angle"]
 
 #: Directions within this many solar angular radii of the sun's centre are left out of fits and
 #: error statistics: the solar disk is not part of the sky model.
@@ -129,9 +140,6 @@ def _dataset_path(path) -> str:
 def _sky_configurations(grid) -> dict:
     """Per sky (C order over the grid's axes): sun direction, elevation, angular radius,
     turbidity and ground albedo of its scene."""
-    from skyref.atmosphere import ConstantSpectrum, turbidity
-    from skyref.scene import Scene
-
     columns = {name: [] for name in ("sun_directions", "solar_elevation", "sun_angular_radius", "turbidity", "albedo")}
     for index in range(len(grid)):
         scene = Scene.from_dict(grid.sky(index).scene)
@@ -162,10 +170,6 @@ def load_batch_dataset(path) -> dict[str, TrainingSet]:
     """Training sets (kind -> :class:`TrainingSet`) of a spectral ``skyref batch`` dataset:
     ``path`` is its output directory or its ``dataset.zarr``. See the module's documentation."""
     import xarray as xr
-
-    from skyref.batch.grid import Grid, OutputSettings
-    from skyref.projection import pixel_directions, solid_angle
-    from skyref.scene import Camera
 
     path = _dataset_path(path)
     dataset = xr.open_zarr(path)

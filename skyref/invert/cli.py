@@ -11,18 +11,20 @@ Writes fit/result.json, convergence.png, residuals.png, fitted.exr and residual.
 
 from __future__ import annotations
 
+from skyref.atmosphere import PRESETS, preset
 from skyref.errors import ParameterError
+from skyref.invert import (InversionSettings, ParameterSet, invert, observation, read_exclusion_mask, read_image,
+                           sun_from_arguments)
+from skyref.invert.inputs import CHANNEL_CHOICES, MAX_WAVELENGTHS
+from skyref.invert.parameters import DEFAULT_FREE, UNKNOWNS
+from skyref.scene import CAMERA_TYPES, Observer
 from skyref.validation import check_output_directory
+
+__all__ = ["add_invert_parser", "cmd_invert"]
 
 
 def add_invert_parser(subparsers):
     """Add the ``invert`` subcommand to ``skyref``'s argparse subparsers."""
-    from skyref.atmosphere import PRESETS
-    from skyref.invert.inputs import CHANNEL_CHOICES, MAX_WAVELENGTHS
-    from skyref.invert.optimizer import InversionSettings
-    from skyref.invert.parameters import DEFAULT_FREE, UNKNOWNS
-    from skyref.scene import CAMERA_TYPES
-
     defaults = InversionSettings()
     p = subparsers.add_parser("invert", help="fit aerosol, ozone and ground albedo to a sky image (differentiable "
                               "ground truth)")
@@ -118,11 +120,6 @@ def _camera(args):
 
 def cmd_invert(args) -> int:
     """Run ``skyref invert`` (see the module's documentation)."""
-    from skyref.atmosphere import preset
-    from skyref.invert import (InversionSettings, ParameterSet, invert, observation, read_exclusion_mask,
-                               read_image, sun_from_arguments)
-    from skyref.scene import Observer
-
     # Everything is checked before the first render.
     check_output_directory(args.out, "--out")
     atmosphere = preset(args.atmosphere)

@@ -22,6 +22,10 @@ excluded by the user's mask, at most ``max_view_zenith_deg`` from the zenith (de
 sky only, since a real ground is not skyref's uniform Lambertian plane) and at least
 ``sun_exclusion_deg`` plus half a pixel from the sun's centre (the disk and the steepest part of
 the aureole).
+
+colour-science (also through :mod:`skyref.color`) and PIL are imported inside the functions that
+use them: colour-science takes about 2.5 s to import, and ``skyref --help`` imports this module
+(through :mod:`skyref.invert`).
 """
 
 from __future__ import annotations
@@ -33,10 +37,17 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
+import OpenEXR
 
 from skyref.validation import check_array, check_choice, check_int, check_number
 from skyref.errors import ParameterError
-from skyref.scene import Camera, Observer, Sun
+from skyref.io.exr import read_sky_exr
+from skyref.projection import pixel_directions, solid_angle
+from skyref.scene import Camera, Observer, RenderSettings, Scene, Sun
+
+__all__ = ["CHANNEL_CHOICES", "LDR_SATURATED", "LDR_SUFFIXES", "MAX_WAVELENGTHS", "MIN_IMAGE_SIDE",
+           "RGB_MODEL_WAVELENGTHS_NM", "SUN_CONTRAST", "Observation", "SkyImage", "estimate_sun", "image_from_sky",
+           "observation", "read_exclusion_mask", "read_image", "sun_from_arguments"]
 
 #: Wavelengths (nm) on which RGB images are modelled: the visible range every 40 nm. Eight or more
 #: points, so XYZ is integrated on this grid rather than interpolated (skyref.color).
@@ -122,8 +133,6 @@ def read_image(path, channels: str = "auto") -> SkyImage:
         return _read_ldr(path)
     if suffix != ".exr":
         raise ParameterError("image", path, "an .exr, .png, .jpg or .jpeg file", "unsupported format")
-    import OpenEXR
-
     try:
         with OpenEXR.File(path, separate_channels=True) as exr:
             pixels = exr.channels()
@@ -137,8 +146,6 @@ def read_image(path, channels: str = "auto") -> SkyImage:
             raise ParameterError("image", path, "an EXR with S0.<wavelength>nm channels" +
                                  ("" if channels == "spectral" else " or R, G, B channels"), "no such channels")
         return SkyImage(rgb, "rgb", source=path)
-    from skyref.io.exr import read_sky_exr
-
     sky = read_sky_exr(path)
     if channels != "rgb":
         return dataclasses.replace(image_from_sky(sky, "spectral"), source=path)
@@ -257,8 +264,6 @@ class Observation:
 
     def scene(self, atmosphere, spp=64, seed=0):
         """A :class:`~skyref.scene.Scene` of this observation's geometry with ``atmosphere``."""
-        from skyref.scene import RenderSettings, Scene
-
         return Scene(atmosphere=atmosphere, sun=self.sun, observer=self.observer, camera=self.camera,
                      wavelengths=tuple(self.wavelengths_nm), render=RenderSettings(spp=spp, seed=seed, passes=2),
                      name="fitted")
@@ -302,8 +307,6 @@ def observation(image: SkyImage, camera=None, sun=None, observer=None, exclude=N
     renders before conversion to XYZ (default :data:`RGB_MODEL_WAVELENGTHS_NM`). ``atmosphere``:
     the model's base atmosphere, to check that it covers the wavelengths.
     """
-    from skyref.projection import pixel_directions
-
     notes = []
     height, width = image.shape
     camera = _camera(image, camera)
@@ -366,8 +369,6 @@ def observation(image: SkyImage, camera=None, sun=None, observer=None, exclude=N
         atmosphere.check_wavelengths(model_wavelengths)
 
     # -- pixels used ---------------------------------------------------------------------------------
-    from skyref.projection import solid_angle
-
     mask = np.all(np.isfinite(directions), axis=-1) & np.all(np.isfinite(values) & (values > 0.0), axis=-1)
     if image.saturated is not None:
         mask &= ~image.saturated

@@ -29,7 +29,11 @@ import math
 
 import numpy as np
 
+from skyref.plugins import load_mitsuba
 from skyref.projection import pixel_directions, solid_angle
+from skyref.render import build_integrator
+
+__all__ = ["FOOTPRINT_DEG", "MAX_FOOTPRINT", "ForwardModel", "footprint_split", "stream_seed"]
 
 #: Largest angular size (degrees) of one footprint sub-direction's share of a pixel.
 FOOTPRINT_DEG = 1.0
@@ -61,9 +65,6 @@ class ForwardModel:
     by :func:`footprint_split`)."""
 
     def __init__(self, observation, parameters, rows, cols, footprint: int = 0, variant: str | None = None):
-        from skyref.plugins import load_mitsuba
-        from skyref.render import build_integrator
-
         self.mi = load_mitsuba(variant)
         self.observation = observation
         self.parameters = parameters
@@ -84,7 +85,7 @@ class ForwardModel:
         return self.weights.shape[0]
 
     def _set(self, values):
-        import drjit as dr
+        import drjit as dr  # lazy: Dr.Jit only after load_mitsuba (in __init__) has pointed it at a working libLLVM
 
         for name, value in self.parameters.integrator_values(values).items():
             self.integrator.optics.set_parameter(name, dr.opaque(self.mi.Float, float(value)))
@@ -99,11 +100,9 @@ class ForwardModel:
         return self.observation.to_channels(np.einsum("ps,psn->pn", self.weights, spectral))
 
     def _chunks(self, spp: int) -> list[int]:
-        from skyref.render import MAX_WAVEFRONT
-
-        per_chunk = max(1, MAX_WAVEFRONT // len(self.directions))
-        spp = self._spp_per_direction(spp)
-        return [min(per_chunk, spp - start) for start in range(0, spp, per_chunk)]
+        """The integrator's launch sizes for ``spp`` samples per pixel: each launch (and each AD
+        render of the Jacobian) gets its own seed."""
+        return self.integrator.launch_sizes(len(self.directions), self._spp_per_direction(spp))
 
     def radiance(self, values, seed: int, spp: int) -> np.ndarray:
         """(pixels, channels) model values at ``values`` (all unknowns), ``spp`` samples per

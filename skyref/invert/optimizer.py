@@ -52,6 +52,18 @@ halve what its bounds allowed), or when its estimate sits on a bound. The eviden
 root-mean-square change of log pixel values that one prior standard deviation of it causes, less
 what the exposure absorbs, against the residual noise; and its strongest correlation with
 another unknown.
+
+References
+----------
+K. Levenberg, "A Method for the Solution of Certain Non-Linear Problems in Least Squares", Quarterly of
+Applied Mathematics 2(2), 1944.
+
+D. W. Marquardt, "An Algorithm for Least-Squares Estimation of Nonlinear Parameters", Journal of the
+Society for Industrial and Applied Mathematics 11(2), 1963 (the damping scaled by diag(J^T J)).
+
+H. White, "A Heteroskedasticity-Consistent Covariance Matrix Estimator and a Direct Test for
+Heteroskedasticity", Econometrica 48(4), 1980, and K.-Y. Liang, S. L. Zeger, "Longitudinal Data Analysis
+Using Generalized Linear Models", Biometrika 73(1), 1986 (the sandwich covariance, clustered by pixel).
 """
 
 from __future__ import annotations
@@ -64,7 +76,14 @@ import numpy as np
 
 from skyref.validation import check_int, check_number
 from skyref.errors import ParameterError
-from skyref.invert.model import stream_seed
+from skyref.invert.model import ForwardModel, stream_seed
+from skyref.invert.result import InversionResult
+from skyref.projection import solid_angle
+from skyref.render import render_sky
+
+__all__ = ["JACOBIAN_RESTART_STEP", "MAP_SAMPLES", "MAP_SPP_RANGE", "InversionSettings", "bounded_step",
+           "exposure_offset", "identifiability", "invert", "map_spp", "normal_equations", "sandwich_covariance",
+           "select_pixels"]
 
 
 @dataclass(frozen=True)
@@ -117,8 +136,6 @@ def map_spp(settings, camera) -> int:
 def select_pixels(observation, count: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """(rows, cols) of up to ``count`` usable pixels drawn without replacement with probability
     proportional to their solid angle, so that the fit covers the sky evenly."""
-    from skyref.projection import solid_angle
-
     rows, cols = np.nonzero(observation.mask)
     weights = solid_angle(observation.camera)[rows, cols]
     weights = weights / weights.sum()
@@ -156,6 +173,8 @@ def bounded_step(matrix, g, theta, lower, upper) -> np.ndarray:
     definite) with theta + delta within [lower, upper] for the first len(theta) components (the
     rest, e.g. log exposure, are unbounded). With M = L L^T this is the bounded least-squares
     problem min |L^T delta + L^-1 g|^2, solved exactly by scipy's bounded-variable least squares."""
+    # Lazy: scipy.linalg and scipy.optimize take ~0.8 s to import, and ``skyref --help`` imports this
+    # module (through skyref.invert).
     from scipy.linalg import cholesky, solve_triangular
     from scipy.optimize import lsq_linear
 
@@ -276,17 +295,13 @@ class _Fit:
 def invert(observation, parameters, settings: InversionSettings = InversionSettings(), progress: bool = False):
     """Fit the free unknowns of ``parameters`` to ``observation``; returns an
     :class:`~skyref.invert.result.InversionResult` (see the module docstring for the method)."""
-    from skyref.invert.model import ForwardModel
-    from skyref.invert.result import InversionResult
-    from skyref.render import render_sky
-
     start = time.perf_counter()
     rows, cols = select_pixels(observation, settings.pixels, settings.seed)
     model = ForwardModel(observation, parameters, rows, cols, settings.footprint, settings.variant)
     fit = _Fit(observation, parameters, model, rows, cols)
     bar = None
     if progress:
-        from tqdm import tqdm
+        from tqdm import tqdm  # lazy: its import cost is paid only with a progress bar
 
         bar = tqdm(total=settings.max_iterations + 2, desc="invert", unit="step")
 

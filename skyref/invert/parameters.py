@@ -23,6 +23,11 @@ The optimizer gives every free unknown a weak Gaussian prior centred on its init
 the standard deviation of a uniform distribution over its bounds, (upper - lower) / sqrt 12. It
 keeps parameters that the image cannot constrain near their start and makes that visible: their
 posterior spread stays close to the prior's.
+
+References
+----------
+A. Ångström, "On the atmospheric transmission of sun radiation and on dust in the air", Geografiska
+Annaler 11, 1929 (tau_a(lambda) = beta lambda^-alpha, lambda in um: the mapping of tau_550 to beta).
 """
 
 from __future__ import annotations
@@ -36,6 +41,8 @@ import numpy as np
 from skyref.atmosphere.presets import TURBIDITY_WAVELENGTH_NM
 from skyref.validation import check_choice, check_number
 from skyref.errors import ParameterError
+
+__all__ = ["DEFAULT_FREE", "UNKNOWNS", "ParameterSet", "Unknown"]
 
 #: tau_550 = beta (550 nm / 1 um)^-alpha.
 _REFERENCE_RATIO = TURBIDITY_WAVELENGTH_NM / 1000.0

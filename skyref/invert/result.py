@@ -8,6 +8,10 @@ Residual maps are log(s m) - log y per pixel and channel: model m from the groun
 estimate over the whole image (``map_spp`` samples per pixel; their Monte Carlo error is reported
 beside them), exposure s, observed y; about the relative error for small values. NaN where a
 pixel is not used.
+
+matplotlib and :mod:`skyref.color` are imported inside the plotting methods: selecting matplotlib's
+Agg backend is a side effect, made only when plots are written, and colour-science takes about 2.5 s
+to import while ``skyref --help`` imports this module (through :mod:`skyref.invert`).
 """
 
 from __future__ import annotations
@@ -20,8 +24,16 @@ import warnings
 from dataclasses import dataclass
 
 import numpy as np
+import OpenEXR
 
+import skyref
+from skyref.atmosphere import turbidity
 from skyref.invert.parameters import UNKNOWNS
+from skyref.io.atomic import atomic_path, atomic_write
+from skyref.io.exr import write_sky_exr
+from skyref.io.json_numpy import numpy_default
+
+__all__ = ["PROVENANCE", "InversionResult"]
 
 #: Which model produced which number (the JSON's "provenance").
 PROVENANCE = {
@@ -87,9 +99,6 @@ class InversionResult:
 
     def to_dict(self) -> dict:
         """The JSON document (see the module docstring)."""
-        import skyref
-        from skyref.atmosphere import turbidity
-
         obs, params = self.observation, self.parameters
         std = self.std
         curvature_std = np.sqrt(np.diag(self.covariance_curvature))
@@ -160,10 +169,6 @@ class InversionResult:
     def write(self, directory) -> list[str]:
         """Write result.json, convergence.png, residuals.png, fitted.exr and residual.exr into
         ``directory``; returns their paths."""
-        from skyref.io.atomic import atomic_write
-        from skyref.io.exr import write_sky_exr
-        from skyref.io.json_numpy import numpy_default
-
         os.makedirs(directory, exist_ok=True)
         paths = {name: os.path.join(directory, name) for name in
                  ("result.json", "convergence.png", "residuals.png", "fitted.exr", "residual.exr")}
@@ -176,10 +181,6 @@ class InversionResult:
         return list(paths.values())
 
     def _write_residual_exr(self, path):
-        import OpenEXR
-
-        from skyref.io.atomic import atomic_path
-
         residual = self.residual_map().astype(np.float32)
         channels = {f"residual.{name.replace(' ', '')}": np.ascontiguousarray(residual[..., c])
                     for c, name in enumerate(self.observation.channel_names)}
@@ -195,8 +196,6 @@ class InversionResult:
 
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
-
-        from skyref.io.atomic import atomic_path
 
         free = self.parameters.free
         panels = len(free) + 1
@@ -233,7 +232,6 @@ class InversionResult:
         import matplotlib.pyplot as plt
 
         from skyref.color import default_exposure, spectral_to_linear_srgb, tonemap_srgb8
-        from skyref.io.atomic import atomic_path
 
         obs = self.observation
         observed = obs.image.linear_srgb()

@@ -7,6 +7,8 @@ import contextlib
 import os
 import tempfile
 
+__all__ = ["atomic_path", "atomic_write"]
+
 
 def _umask() -> int:
     mask = os.umask(0)

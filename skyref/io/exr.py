@@ -18,6 +18,13 @@ requires (the only emissive unit it defines; the values are spectral radiance pe
 ``skyref.radianceUnits = "W.m^-2.sr^-1.nm^-1"`` states explicitly), ``skyref.scene`` (the scene
 as TOML, when the sky has one) and ``skyref.metadata`` (JSON of ``sky.metadata`` but its
 timings, :data:`skyref.sky.TIMING_METADATA`: the same render gives the same bytes).
+
+OpenEXR and colour-science are imported inside the functions that use them: ``skyref --help``
+imports this module (through :mod:`skyref.cli`), and colour-science alone takes seconds.
+
+References
+----------
+A. Fichet, R. Pacanowski, A. Wilkie, "An OpenEXR Layout for Spectral Images", JCGT 10(3), 2021.
 """
 
 from __future__ import annotations
@@ -30,11 +37,17 @@ import tomllib
 from decimal import Decimal
 
 import numpy as np
+import tomli_w
 
 from skyref.errors import ParameterError
 from skyref.io.atomic import atomic_path
 from skyref.io.json_numpy import numpy_default
+from skyref.projection import pixel_directions
+from skyref.scene import Scene
 from skyref.sky import ORDER_NAMES, TIMING_METADATA, Sky
+
+__all__ = ["SPECTRAL_LAYOUT_VERSION", "EMISSIVE_UNITS", "RADIANCE_UNITS", "STDERR_LAYER", "channel_name",
+           "write_sky_exr", "read_sky_exr"]
 
 SPECTRAL_LAYOUT_VERSION = "1.0"
 EMISSIVE_UNITS = "W.m^-2.sr^-1"
@@ -79,10 +92,9 @@ def _check_layer(name: str, array, shape) -> np.ndarray:
 
 def write_sky_exr(sky: Sky, path) -> None:
     """Write ``sky`` to ``path`` (atomically: readers never see a partial file)."""
-    import OpenEXR
-    import tomli_w
+    import OpenEXR  # lazy: see the module docstring
 
-    from skyref.color import spectral_to_linear_srgb
+    from skyref.color import spectral_to_linear_srgb  # lazy: see the module docstring
 
     wavelengths = np.asarray(sky.wavelengths_nm, dtype=np.float64).reshape(-1)
     radiance = np.asarray(sky.radiance)
@@ -127,10 +139,7 @@ def read_sky_exr(path) -> Sky:
     NaN without a scene; ``standard_error`` is NaN when the file has no ``stderr`` layer.
     Metadata arrays come back as lists (JSON).
     """
-    import OpenEXR
-
-    from skyref.projection import pixel_directions
-    from skyref.scene import Scene
+    import OpenEXR  # lazy: see the module docstring
 
     path = os.fspath(path)
     if not os.path.isfile(path):

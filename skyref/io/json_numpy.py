@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+__all__ = ["numpy_default"]
+
 
 def numpy_default(value):
     """``default=`` hook of :func:`json.dump`: NumPy scalars become Python numbers and arrays

@@ -1,4 +1,8 @@
-"""PNG previews: tone-mapped 8-bit sRGB images of skies."""
+"""PNG previews: tone-mapped 8-bit sRGB images of skies.
+
+Pillow and colour-science are imported inside :func:`write_png`: ``skyref --help`` imports this
+module (through :mod:`skyref.cli`), and colour-science alone takes seconds.
+"""
 
 from __future__ import annotations
 
@@ -6,6 +10,8 @@ import numpy as np
 
 from skyref.errors import ParameterError
 from skyref.io.atomic import atomic_path
+
+__all__ = ["write_png"]
 
 
 def write_png(sky_or_rgb, path, exposure: float | None = None) -> None:

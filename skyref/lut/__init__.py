@@ -14,6 +14,8 @@ from __future__ import annotations
 
 from skyref.sky_method import Registry
 
+__all__ = ["REGISTRY", "METHODS", "method_class", "lut_method"]
+
 #: Every LUT method by name.
 REGISTRY = Registry("method", {"bruneton2017": ("skyref.lut.bruneton", "Bruneton2017"),
                                "elek2009": ("skyref.lut.elek", "Elek2009"),

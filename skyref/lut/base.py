@@ -18,20 +18,24 @@ from __future__ import annotations
 import time
 
 import drjit as dr
+import mitsuba as mi
 import numpy as np
 
+from skyref.atmosphere.phase import CornetteShanks, HenyeyGreenstein
 from skyref.atmosphere.spectra import solar_irradiance, wavelength_grid
 from skyref.validation import check_choice, check_number
 from skyref.errors import ParameterError
 from skyref.lut.table import PRECISIONS
 from skyref.atmosphere.sun import SUN_ANGULAR_RADIUS_DEG
 from skyref.sky_method import SkyMethod
+from skyref.plugins import load_mitsuba
+from skyref.plugins.optics import AtmosphereOptics
+
+__all__ = ["load_lut_backend", "LutOptics", "LutMethod"]
 
 
 def load_lut_backend(variant: str | None = None):
     """Load Mitsuba (its Dr.Jit backend runs the LUT kernels) and return the module."""
-    from skyref.plugins import load_mitsuba
-
     return load_mitsuba(variant)
 
 
@@ -40,20 +44,19 @@ class LutOptics:
     Shanks or Henyey–Greenstein phase) and absorbers, per lane on a wavelength channel."""
 
     def __init__(self, atmosphere, wavelengths_nm):
-        from skyref.plugins.optics import AtmosphereOptics
-
         self.atmosphere = atmosphere
         self.optics = AtmosphereOptics(atmosphere, wavelengths_nm)
         self.wavelengths_nm = self.optics.wavelengths_nm
-        self.rayleigh = [c for c in self.optics.components if c.phase_kind == "rayleigh"]
+        self.rayleigh = [c for c in self.optics.components if c.kind == "rayleigh"]
         self.mie = [c for c in self.optics.components if c.kind == "aerosol"]
         self.absorbers = [c for c in self.optics.components if c.kind == "absorber"]
         if len(self.rayleigh) > 1 or len(self.mie) > 1:
             raise ParameterError("atmosphere", [c.name for c in self.optics.components],
                                  "at most one Rayleigh constituent and one aerosol",
                                  "LUT methods store one Rayleigh and one Mie term")
-        if self.mie and self.mie[0].phase_kind not in ("cornette_shanks", "henyey_greenstein"):
-            raise ParameterError(f"{self.mie[0].name}.phase", self.mie[0].phase_kind,
+        # the LUT kernels evaluate these two phase functions' formulas with their parameter g
+        if self.mie and not isinstance(self.mie[0].model.phase, (CornetteShanks, HenyeyGreenstein)):
+            raise ParameterError(f"{self.mie[0].name}.phase", self.mie[0].model.phase.kind,
                                  "cornette_shanks or henyey_greenstein", "not supported by LUT methods")
         self.bottom_radius = float(atmosphere.bottom_radius_m)
         self.top_radius = float(atmosphere.top_radius_m)
@@ -65,8 +68,6 @@ class LutOptics:
     def scattering(self, altitude, channel):
         """(Rayleigh scattering, Mie scattering) coefficients at ``altitude`` (m) for the lanes'
         wavelength ``channel``, m^-1 (Float64)."""
-        import mitsuba as mi
-
         rayleigh = mi.Float64(0.0)
         for c in self.rayleigh:
             rayleigh += mi.Float64(c.coefficients(channel)[0]) * c.density(altitude)
@@ -77,8 +78,6 @@ class LutOptics:
 
     def extinction(self, altitude, channel):
         """Total extinction coefficient at ``altitude`` (m) for the lanes' ``channel``, m^-1."""
-        import mitsuba as mi
-
         total = mi.Float64(0.0)
         for c in self.optics.components:
             s, a = c.coefficients(channel)
@@ -91,8 +90,6 @@ class LutOptics:
 
     def mie_extinction_to_scattering(self, channel):
         """sigma_t / sigma_s of the aerosol for the lanes' channel (1 without aerosol)."""
-        import mitsuba as mi
-
         if not self.mie:
             return mi.Float64(1.0)
         s, a = self.mie[0].coefficients(channel)
@@ -105,8 +102,6 @@ class LutOptics:
         return self.mie[0].phase(nu) if self.mie else 0.0 * nu
 
     def ground_albedo(self, channel):
-        import mitsuba as mi
-
         albedo = self.optics.ground_albedo
         index = channel if dr.width(albedo) > 1 else 0 * channel
         return mi.Float64(dr.gather(mi.Float, albedo, index))
@@ -163,8 +158,6 @@ class LutMethod(SkyMethod):
         """Radiance seen from ``observer_altitude_m`` (m) along unit ``directions`` (M, 3),
         east-north-up, with the sun towards ``sun_direction`` (3,): (M, N) W m^-2 sr^-1 nm^-1,
         solar disk excluded."""
-        import mitsuba as mi
-
         dirs, sun, altitude = self._checked_view(directions, sun_direction, observer_altitude_m)
         r = self.optics.bottom_radius + altitude
         mu = mi.Float64(dirs[:, 2])

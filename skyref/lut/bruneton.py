@@ -74,6 +74,14 @@ function of that clamped nu, interpolating scales them by P_R(nu) / P_R(nu_cell)
 paper's sizes double scattering is off by -13% .. +11% 10-40 deg from the zenith (sun at 60 deg)
 and the total sky radiance by up to -9% (sun at 30 deg). The 16 x 32 samples of the scattering
 density miss the bright horizon band: double scattering near the ground -10% at 680 nm.
+
+References
+----------
+E. Bruneton, F. Neyret, "Precomputed Atmospheric Scattering", Computer Graphics Forum 27(4)
+(Proc. EGSR 2008), 2008.
+
+E. Bruneton, "Precomputed Atmospheric Scattering: a New Implementation", 2017,
+https://ebruneton.github.io/precomputed_atmospheric_scattering/ (code and documentation).
 """
 
 from __future__ import annotations
@@ -91,6 +99,8 @@ from skyref.lut.base import LutMethod
 from skyref.lut.table import PRECISIONS, Table, texture_coordinate, unit_range
 from skyref.lut.transmittance import TransmittanceTable
 from skyref.atmosphere.sun import SUN_ANGULAR_RADIUS_DEG
+
+__all__ = ["METRES_PER_KM", "Bruneton2017"]
 
 
 #: The scattering density is stored per kilometre (W m^-2 sr^-1 nm^-1 km^-1), as in Bruneton's

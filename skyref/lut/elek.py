@@ -90,6 +90,19 @@ accumulates the optical depth itself (trapezoidal rule on the same samples), whi
 precision a ratio of two table values loses near the horizon. Integrals along rays use Simpson's
 rule on ``integration_samples`` intervals (100 agree with 400 to 0.1% on horizon rays at
 sunset). Ozone (and any absorber) is in the extinction.
+
+References
+----------
+O. Elek, "Rendering Parametrizable Planetary Atmospheres with Multiple Scattering in Real-Time",
+CESCG 2009.
+
+G. Bodare, E. Sandberg, "Efficient and Dynamic Atmospheric Scattering", MSc thesis, Chalmers
+University of Technology, 2014.
+
+E. Yusov, "Outdoor Light Scattering Sample Update", Intel, 2013 (the view-zenith mapping).
+
+E. Bruneton, F. Neyret, "Precomputed Atmospheric Scattering", Computer Graphics Forum 27(4)
+(Proc. EGSR 2008), 2008 (the sun-zenith mapping).
 """
 
 from __future__ import annotations
@@ -107,6 +120,11 @@ from skyref.lut.base import LutMethod
 from skyref.lut.table import Table, texture_coordinate, unit_range
 from skyref.lut.transmittance import TransmittanceTable
 from skyref.atmosphere.sun import SUN_ANGULAR_RADIUS_DEG
+
+__all__ = ["VIEW_EXPONENT", "SUN_MU_MIN", "SUN_ANGLE_SCALE", "SUN_ANGLE_SPAN", "AZIMUTH_SAMPLES", "RAYLEIGH_PHASES",
+           "height_unit", "altitude_from_height_unit", "cos_horizon", "view_unit", "mu_from_view_unit",
+           "view_texture_coordinate", "sun_unit", "mu_s_from_sun_unit", "elek_rayleigh_phase", "Elek2009",
+           "AerialPerspectiveVolume"]
 
 VIEW_EXPONENT = 0.2            # horizon-split view mapping (Yusov 2013, Bodare–Sandberg 2014)
 SUN_MU_MIN = -0.1975           # sun-zenith mapping constants (Bruneton 2008)

@@ -71,6 +71,17 @@ wavelength (the reference keeps one grey value in the alpha channel). Phase func
 atmosphere's (the reference demo's aerosol is Cornette–Shanks too). Tables store radiance per
 unit solar irradiance (sr^-1, the reference's ``ILLUMINANCE_IS_ONE``); lookups multiply by the
 solar spectral irradiance.
+
+References
+----------
+S. Hillaire, "A Scalable and Production Ready Sky and Atmosphere Rendering Technique", Computer
+Graphics Forum 39(4) (Proc. EGSR 2020), 2020.
+
+S. Hillaire, "Physically Based and Unified Volumetric Rendering in Frostbite", SIGGRAPH 2015 course
+"Advances in Real-Time Rendering in Games" (the energy-conserving segment integral).
+
+S. Hillaire, UnrealEngineSkyAtmosphere, https://github.com/sebh/UnrealEngineSkyAtmosphere
+(the reference implementation).
 """
 
 from __future__ import annotations
@@ -89,6 +100,10 @@ from skyref.lut.base import LutMethod
 from skyref.lut.table import Table, texture_coordinate, unit_range
 from skyref.lut.transmittance import TransmittanceTable
 from skyref.atmosphere.sun import SUN_ANGULAR_RADIUS_DEG
+from skyref.projection import camera_to_world, perspective_direction
+
+__all__ = ["ISOTROPIC_PHASE", "SEGMENT_SAMPLE_POSITION", "SKY_VIEW_FULL_SAMPLES_DISTANCE", "SKY_VIEW_CACHE_SIZE",
+           "cos_view_sun_azimuth", "sky_view_coordinates", "sky_view_direction", "Hillaire2020", "AerialPerspective"]
 
 #: Isotropic phase function, sr^-1.
 ISOTROPIC_PHASE = 1.0 / (4.0 * math.pi)
@@ -471,8 +486,6 @@ class AerialPerspective:
     where the ray enters it."""
 
     def __init__(self, method: Hillaire2020, camera, sun_direction, observer_altitude_m: float):
-        from skyref.projection import camera_to_world, perspective_direction
-
         if getattr(camera, "type", None) != "perspective":
             raise ParameterError("camera.type", getattr(camera, "type", camera), "'perspective'",
                                  "the aerial perspective volume needs a frustum")

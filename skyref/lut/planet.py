@@ -11,11 +11,19 @@ radius R_t:
   mu_d = (r mu + d) / r_d.
 
 Functions take Dr.Jit arrays (use Float64: r^2 - R^2 cancels badly in float32).
+
+References
+----------
+E. Bruneton, "Precomputed Atmospheric Scattering: a New Implementation", 2017,
+https://ebruneton.github.io/precomputed_atmospheric_scattering/ (code and documentation).
 """
 
 from __future__ import annotations
 
 import drjit as dr
+
+__all__ = ["distance_to_top", "distance_to_bottom", "intersects_ground", "distance_to_nearest_boundary",
+           "point_along_ray"]
 
 
 def distance_to_top(r, mu, top_radius):

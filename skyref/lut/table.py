@@ -18,6 +18,8 @@ import numpy as np
 
 from skyref.validation import check_choice
 
+__all__ = ["PRECISIONS", "texture_coordinate", "unit_range", "cell_centres", "Table"]
+
 PRECISIONS = ("float32", "float16")
 
 

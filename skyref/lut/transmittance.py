@@ -11,6 +11,14 @@ each mapped onto texel centres. This spends resolution near the horizon, where T
 The optical depth is integrated with the trapezoidal rule (500 samples in the paper). The ray
 towards the top never meets the ground, so T to a point between is a ratio of two table values
 (:meth:`TransmittanceTable.between`).
+
+References
+----------
+E. Bruneton, F. Neyret, "Precomputed Atmospheric Scattering", Computer Graphics Forum 27(4)
+(Proc. EGSR 2008), 2008.
+
+E. Bruneton, "Precomputed Atmospheric Scattering: a New Implementation", 2017,
+https://ebruneton.github.io/precomputed_atmospheric_scattering/ (code and documentation).
 """
 
 from __future__ import annotations
@@ -21,6 +29,8 @@ import numpy as np
 
 from skyref.lut import planet
 from skyref.lut.table import Table, texture_coordinate, unit_range
+
+__all__ = ["TransmittanceTable"]
 
 
 class TransmittanceTable:

@@ -7,9 +7,18 @@ when a GPU is present, else ``llvm_ad_rgb``) and registers skyref's plugins:
 - ``atmosphere_phase`` phase function (:mod:`skyref.plugins.phase`);
 - ``equirectangular`` and ``fisheye`` sensors (:mod:`skyref.plugins.sensors`);
 - ``atmosphere`` integrator (:mod:`skyref.plugins.integrator`), the fast ground truth.
+
+Dr.Jit and Mitsuba are imported inside the functions on purpose: Dr.Jit loads libLLVM when it is
+imported, so :func:`~skyref._llvm.configure_libllvm` must run first, and the plugin modules
+import Mitsuba at module level.
 """
 
 from __future__ import annotations
+
+from skyref._llvm import configure_libllvm
+from skyref.validation import check_choice
+
+__all__ = ["default_variant", "load_mitsuba"]
 
 _registered_for = set()
 
@@ -23,14 +32,9 @@ def default_variant() -> str:
 def load_mitsuba(variant: str | None = None):
     """Import Mitsuba with ``variant`` (default: :func:`default_variant`), register skyref's
     plugins for it and return the ``mitsuba`` module."""
-    from skyref._llvm import configure_libllvm
-
     configure_libllvm()
-    import mitsuba as mi
-
-    from skyref.validation import check_choice
-
     import drjit as dr
+    import mitsuba as mi
 
     backends = {"llvm": dr.JitBackend.LLVM, "cuda": dr.JitBackend.CUDA}
     supported = [v for v in mi.variants() if v.split("_", 2)[-1] in ("rgb", "spectral") and "_ad_" in v

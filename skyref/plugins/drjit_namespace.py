@@ -3,6 +3,8 @@ functions, spectra, camera projections) run on Dr.Jit arrays of the current Mits
 
 import drjit as dr
 
+__all__ = ["DrJitNamespace", "xp"]
+
 
 class DrJitNamespace:
     """``xp`` for Dr.Jit: the subset of NumPy's names that skyref's formulas use."""

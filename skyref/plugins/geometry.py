@@ -25,6 +25,8 @@ import mitsuba as mi
 from skyref.plugins import quadrature
 from skyref.plugins.drjit_namespace import xp
 
+__all__ = ["UNBOUNDED_DISTANCE_M", "GRAZING_COSINE", "SphericalShell", "PlaneParallelSlab"]
+
 #: Distance used for rays that never leave a plane-parallel slab (horizontal rays), m.
 UNBOUNDED_DISTANCE_M = 1.0e9
 

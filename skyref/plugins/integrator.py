@@ -55,6 +55,21 @@ Differentiable parameters (:class:`skyref.plugins.optics.AtmosphereOptics`) ente
 throughput weights: sampling decisions (majorants, event and component probabilities, sampling
 densities) are detached, so forward-mode derivatives of the estimate are unbiased estimates of
 the derivatives of the radiance.
+
+References
+----------
+E. R. Woodcock, T. Murphy, P. J. Hemmings and T. C. Longworth, "Techniques used in the GEM code
+for Monte Carlo neutronics calculations in reactors and other systems of complex geometry",
+ANL-7050 (1965) (delta tracking).
+
+P. Kutz, R. Habel, Y. K. Li and J. Novák, "Spectral and Decomposition Tracking for Rendering
+Heterogeneous Volumes", ACM TOG 36(4) (2017) (spectral tracking, history-aware probabilities).
+
+J. Novák, A. Selle and W. Jarosz, "Residual Ratio Tracking for Estimating Attenuation in
+Participating Media", ACM TOG 33(6) (2014) (ratio tracking).
+
+E. Veach and L. J. Guibas, "Optimally Combining Sampling Techniques for Monte Carlo Rendering",
+SIGGRAPH 1995 (the balance heuristic of the sun lobe's one-sample MIS).
 """
 
 from __future__ import annotations
@@ -65,17 +80,23 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from skyref.plugins.geometry import PlaneParallelSlab, SphericalShell
-from skyref.plugins.line_integral import LineIntegral, grey_sum
+from skyref.atmosphere import wavelength_grid
 from skyref.atmosphere.phase import henyey_greenstein_phase, sample_henyey_greenstein_cosine
 from skyref.atmosphere.sun import SUN_ANGULAR_RADIUS_DEG, SunDisk
+from skyref.errors import ParameterError
 from skyref.plugins.drjit_namespace import xp
+from skyref.plugins.geometry import PlaneParallelSlab, SphericalShell
+from skyref.plugins.line_integral import LineIntegral, grey_sum
 from skyref.plugins.optics import AtmosphereOptics, atmosphere_from_property, direction_with_cosine
 from skyref.plugins.quadrature import panel_levels
 from skyref.plugins.sobol import ScrambledSobolSampler, hash_combine
 from skyref.plugins.sun_optical_depth import SunOpticalDepth
 from skyref.scene import direction_from_angles
 from skyref.sky import ORDER_NAMES
+from skyref.validation import check_choice, check_number
+
+__all__ = ["ESTIMATORS", "DEFAULT_ESTIMATOR", "MAX_WAVEFRONT", "MAX_LANE_VALUES", "PathVertex", "RadianceByOrder",
+           "PathSegment", "ShadowRay", "SunLight", "AtmosphereIntegrator", "register"]
 
 #: Majorants are inflated by this factor so that float32 rounding of an altitude can never push
 #: the local extinction above them (any upper bound keeps delta tracking unbiased).
@@ -115,6 +136,10 @@ LINE_ROULETTE_THROUGHPUT = 0.1
 #: sun zenith 60: 0.25 cut the variance of double scattering 10x, of 3+ orders 1.4x).
 SUN_LOBE_PROBABILITY = 0.3
 
+#: Most samples (lanes) one launch traces: bounds the path state (~100 bytes per sample and
+#: channel). Fewer, larger launches pay the Python tracing of the kernel once.
+MAX_WAVEFRONT = 1 << 21
+
 #: Most per-sample values (samples x 4 orders x wavelengths) one launch holds before they are
 #: summed per target (2^27 float32: 512 MB).
 MAX_LANE_VALUES = 1 << 27
@@ -125,6 +150,45 @@ SINGLE_SCATTERING_SEED = 0x9E3779B9
 #: Paths per sample of the camera segment's light when the camera direction is fixed (only the
 #: point in the sun's disk varies): the single-scattering launch costs at most ~1/8 more.
 PATHS_PER_SINGLE_SCATTERING_SAMPLE = 8
+
+
+class PathVertex:
+    """A path between two events, as both estimators carry it: its vertex (``point`` in the
+    observer frame and its ``altitude``, m), the unit ``direction`` it leaves in, its
+    ``throughput`` per channel, the scattering and ground events so far (``depth``) and whether it
+    is still traced (``alive``)."""
+
+    DRJIT_STRUCT = {"point": mi.Point3f, "altitude": mi.Float, "direction": mi.Vector3f,
+                    "throughput": mi.ArrayXf, "depth": mi.UInt32, "alive": mi.Bool}
+
+    def __init__(self, point=None, altitude=None, direction=None, throughput=None, depth=None, alive=None):
+        self.point, self.altitude, self.direction = point, altitude, direction
+        self.throughput, self.depth, self.alive = throughput, depth, alive
+
+
+class RadianceByOrder:
+    """The radiance a camera sample has gathered so far, per channel and scattering order
+    (``ORDER_NAMES``): ``direct`` (the solar disk seen through the atmosphere), ``single``,
+    ``double`` and ``higher`` (3 or more events), in W m^-2 sr^-1 nm^-1."""
+
+    DRJIT_STRUCT = {"direct": mi.ArrayXf, "single": mi.ArrayXf, "double": mi.ArrayXf, "higher": mi.ArrayXf}
+
+    def __init__(self, direct=None, single=None, double=None, higher=None):
+        self.direct, self.single, self.double, self.higher = direct, single, double, higher
+
+    @staticmethod
+    def zeros(channels):
+        return RadianceByOrder(channels.zeros(), channels.zeros(), channels.zeros(), channels.zeros())
+
+    def file(self, order, light, active):
+        """Add ``light`` under scattering order ``order`` (1, 2, or 3 and more) where ``active``."""
+        self.single = dr.select(active & (order == 1), self.single + light, self.single)
+        self.double = dr.select(active & (order == 2), self.double + light, self.double)
+        self.higher = dr.select(active & (order >= 3), self.higher + light, self.higher)
+
+    def by_order(self) -> list:
+        """The four orders in ``ORDER_NAMES`` order."""
+        return [self.direct, self.single, self.double, self.higher]
 
 
 class PathSegment:
@@ -166,8 +230,6 @@ class SunLight:
         # Opaque: skies that differ only in the sun's position share compiled kernels.
         self.direction = mi.Vector3f(*[dr.opaque(mi.Float, float(x)) for x in direction])
         self.disk = disk
-        self.cos_radius = disk.cos_radius
-        self.solid_angle = disk.solid_angle_sr
         self.irradiance = mi.Float(np.asarray(disk.irradiance(wavelengths_nm), np.float32))
         self.frame = mi.Frame3f(self.direction)
 
@@ -182,7 +244,7 @@ class SunLight:
     def sample_direction(self, u):
         """A direction uniformly distributed (in solid angle) inside the disk; returns it with
         the factor by which E_sun must be multiplied (the limb-darkening ratio)."""
-        local = mi.warp.square_to_uniform_cone(u, self.cos_radius)
+        local = mi.warp.square_to_uniform_cone(u, self.disk.cos_radius)
         # No inside test here: in float32, cos(radius) ~ 1 - 1e-5 is resolved to ~1/180 of the
         # cone, and a sampled direction must never be rejected by rounding.
         return self.frame.to_world(local), self.disk.limb_darkening_factor(local.z, xp)
@@ -206,8 +268,6 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         super().__init__(props)
         atmosphere = atmosphere_from_property(props.get("atmosphere", "bruneton2017"))
         wavelengths = props.get("wavelengths", "rgb")
-        from skyref.atmosphere import wavelength_grid
-
         grid = wavelength_grid("rgb" if wavelengths == "rgb" else [float(x) for x in wavelengths.split(",")])
         self.configure(atmosphere, grid, sun_zenith_deg=props.get("sun_zenith", 30.0),
                        sun_azimuth_deg=props.get("sun_azimuth", 180.0),
@@ -223,8 +283,6 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
                   sun_angular_radius_deg, limb_darkening=False, observer_altitude_m=0.0,
                   geometry="spherical", max_depth=64, wavelengths_per_path=0, estimator=DEFAULT_ESTIMATOR):
         """Set the atmosphere, wavelength grid (nm), sun, observer and estimator settings."""
-        from skyref.validation import check_choice, check_number
-
         check_choice("geometry", geometry, ("spherical", "plane_parallel"))
         self.estimator = check_choice("estimator", estimator, ESTIMATORS)
         self.optics = AtmosphereOptics(atmosphere, wavelengths_nm)
@@ -232,8 +290,6 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         n = len(self.wavelengths_nm)
         k = int(wavelengths_per_path) or n
         if not 1 <= k <= n:
-            from skyref.errors import ParameterError
-
             raise ParameterError("wavelengths_per_path", wavelengths_per_path, f"an integer in [1, {n}]")
         self.channels = k
         self.max_depth = int(check_number("max_depth", max_depth, 1, 100_000))
@@ -262,14 +318,15 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         peaked aerosol's sampling density, and drawn with probability SUN_LOBE_PROBABILITY x the
         aerosols' share of the vertical scattering optical depth at the grid's middle wavelength
         (a Rayleigh sky has no forward peak to aim at; on the clear preset, 5% aerosol, a fixed
-        probability of 0.25 raised the variance of double scattering by half). Returns (g, P)."""
+        probability of 0.25 raised the variance of double scattering by half). A phase function
+        has a forward peak if its asymmetry parameter is positive. Returns (g, P)."""
         middle = [float(np.median(self.wavelengths_nm))]
         depths, peaks = {}, []
-        for constituent, component in zip(atmosphere.constituents, self.optics.components):
-            if component.phase_kind is None:
+        for constituent in atmosphere.constituents:
+            if constituent.phase is None:
                 continue
             column = constituent.profile.column_above(0.0, atmosphere.thickness_m, np)
-            peaked = component.phase_kind != "rayleigh"
+            peaked = constituent.phase.asymmetry > 0.0          # a forward peak to aim at
             depths[peaked] = depths.get(peaked, 0.0) + float(constituent.scattering_coefficient(middle)[0] * column)
             if peaked:
                 peaks.append(constituent.phase.sampling_g)
@@ -303,13 +360,14 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
     # --- rendering ----------------------------------------------------------------------------
 
     def render_orders(self, sensor, seed: int, spp: int, pixel_centres: bool = False, batches: int = 1,
-                      sample_offset: int = 0) -> mi.TensorXf:
+                      progress=None) -> mi.TensorXf:
         """Render through a Mitsuba sensor: a tensor (H, W, 4, N) of radiance per pixel,
         scattering order (``ORDER_NAMES``) and grid wavelength, W m^-2 sr^-1 nm^-1, from ``spp``
         samples per pixel; with ``batches`` > 1, (batches, H, W, 4, N) from as many independent
-        batches of ``spp`` samples, traced in one launch. Samples cover each pixel uniformly, or
-        look along its centre only (``pixel_centres``). A render split into calls passes the same
-        ``seed`` to each, and as ``sample_offset`` the samples per batch of the calls before."""
+        batches of ``spp`` samples, traced together. Samples cover each pixel uniformly, or look
+        along its centre only (``pixel_centres``). The samples are traced in launches of bounded
+        size (:meth:`launch_sizes`); ``progress``, if given, is called with the samples per pixel
+        and batch of each launch when it is done."""
         width, height = (int(x) for x in sensor.film().crop_size())
 
         def camera_rays(sampler, pixel):
@@ -320,11 +378,10 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
                                             sample3=sampler.next_2d(), active=True)
             return ray.o, ray.d, dr.max(mi.Spectrum(weight), axis=0) > 0.0
 
-        image = self._estimate(seed, width * height, spp, batches, camera_rays, pixel_centres, sample_offset)
+        image = self._estimate(seed, width * height, spp, batches, camera_rays, pixel_centres, progress)
         return self._tensor(image, batches, (height, width))
 
-    def render_directions(self, directions, seed: int, spp: int, batches: int = 1,
-                          sample_offset: int = 0) -> mi.TensorXf:
+    def render_directions(self, directions, seed: int, spp: int, batches: int = 1) -> mi.TensorXf:
         """Radiance seen from the observer along given unit directions (array (M, 3), east-north-
         up): a tensor (M, 4, N) like :meth:`render_orders` (or (batches, M, 4, N)), without a
         sensor or pixel filter."""
@@ -334,7 +391,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         def camera_rays(sampler, target):
             return mi.Point3f(0.0), dr.gather(mi.Vector3f, table, target), mi.Bool(True)
 
-        image = self._estimate(seed, directions.shape[0], spp, batches, camera_rays, True, sample_offset)
+        image = self._estimate(seed, directions.shape[0], spp, batches, camera_rays, True)
         return self._tensor(image, batches, (directions.shape[0],))
 
     def _tensor(self, image, batches, shape):
@@ -378,37 +435,42 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         sampler.seed(dr.opaque(mi.UInt32, (seed * 0x9E3779B1 + sample_offset * 0x85EBCA77) % (1 << 32)), wavefront)
         return sampler, target, batch
 
-    def _estimate(self, seed, targets, spp, batches, camera_rays, fixed_directions, sample_offset=0):
+    def _estimate(self, seed, targets, spp, batches, camera_rays, fixed_directions, progress=None):
         """The flat (batches, targets, 4, N) radiance buffer from ``spp`` samples per target and
-        batch (numbers ``sample_offset`` on of their sequences); ``camera_rays(sampler,
-        target)`` gives each sample's (origin, direction, valid). Launches hold at most
-        MAX_LANE_VALUES per-sample values (4 orders x N wavelengths per sample): more samples are
-        traced in several launches that continue the sequences.
+        batch; ``camera_rays(sampler, target)`` gives each sample's (origin, direction, valid).
 
         With the line-integral estimator and ``fixed_directions`` (one direction per target), the
         camera segment's light (solar disk, single scattering) depends only on the point drawn
-        in the sun's disk: it is traced in its own launch with one sample per
-        ``PATHS_PER_SINGLE_SCATTERING_SAMPLE`` paths per target and batch, and the ``spp`` paths carry orders >= 2 only."""
+        in the sun's disk: it is traced in its own launches with one sample per
+        ``PATHS_PER_SINGLE_SCATTERING_SAMPLE`` paths per target and batch, and the ``spp`` paths
+        carry orders >= 2 only."""
         if self.estimator != "line_integral" or self.objects is not None or not fixed_directions:
-            return self._launches(seed, targets, spp, batches, camera_rays, "all", sample_offset)
-        image = self._launches(seed, targets, spp, batches, camera_rays, "multiple", sample_offset)
-        share = PATHS_PER_SINGLE_SCATTERING_SAMPLE
-        image += self._launches((seed + SINGLE_SCATTERING_SEED) % (1 << 32), targets, -(-spp // share), batches,
-                                camera_rays, "single", -(-sample_offset // share))
+            return self._launches(seed, targets, spp, batches, camera_rays, "all", progress)
+        image = self._launches(seed, targets, spp, batches, camera_rays, "multiple", progress)
+        image += self._launches((seed + SINGLE_SCATTERING_SEED) % (1 << 32), targets,
+                                -(-spp // PATHS_PER_SINGLE_SCATTERING_SAMPLE), batches, camera_rays, "single")
         return image
 
-    def _launches(self, seed, targets, spp, batches, camera_rays, orders, sample_offset):
-        """:meth:`_launch` in pieces of at most MAX_LANE_VALUES per-sample values, combined by
-        their sample counts."""
-        per_sample = targets * batches * len(ORDER_NAMES) * len(self.wavelengths_nm)
-        step = max(1, min(spp, MAX_LANE_VALUES // per_sample))
+    def launch_sizes(self, targets: int, spp: int, batches: int = 1) -> list:
+        """How ``spp`` samples per target and batch are split into launches: the samples per
+        target and batch of each, so that a launch traces at most MAX_WAVEFRONT samples and holds
+        at most MAX_LANE_VALUES per-sample values (4 orders x N wavelengths each)."""
+        lanes = targets * batches
+        step = max(1, min(spp, MAX_WAVEFRONT // lanes,
+                          MAX_LANE_VALUES // (lanes * len(ORDER_NAMES) * len(self.wavelengths_nm))))
+        return [min(step, spp - done) for done in range(0, spp, step)]
+
+    def _launches(self, seed, targets, spp, batches, camera_rays, orders, progress=None):
+        """:meth:`_launch` in the pieces of :meth:`launch_sizes`, each continuing the samples'
+        sequences where the one before stopped, combined by their sample counts."""
         image, done = None, 0
-        while done < spp:
-            count = min(step, spp - done)
-            part = self._launch(seed, targets, count, batches, camera_rays, orders, sample_offset + done)
+        for count in self.launch_sizes(targets, spp, batches):
+            part = self._launch(seed, targets, count, batches, camera_rays, orders, done)
             part = part * (count / spp) if count < spp else part
             image = part if image is None else image + part
             done += count
+            if progress is not None:
+                progress(count)
         return image
 
     def _launch(self, seed, targets, spp, batches, camera_rays, orders, sample_offset):
@@ -511,7 +573,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
 
     def _solar_disk(self, d):
         """Radiance of the solar disk seen along ``d`` per unit E_sun, sr^-1."""
-        return self.sun.radiance_factor(dr.dot(d, self.sun.direction)) / self.sun.solid_angle
+        return self.sun.radiance_factor(dr.dot(d, self.sun.direction)) / self.sun.disk.solid_angle_sr
 
     def _trace_line_integral(self, sampler, origin, direction, indices, active, orders="all"):
         """The line-integral estimator (:mod:`skyref.plugins.line_integral`). One loop iteration
@@ -531,52 +593,44 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         e_sun = self.sun.channel_irradiance(indices)
         d = mi.Vector3f(direction)
         p, h, misses = self._enter_atmosphere(origin, d, active)
-        direct = channels.zeros()
+        radiance = RadianceByOrder.zeros(channels)
         if orders != "multiple":
-            direct = dr.select(misses, e_sun * self._solar_disk(d), direct)
-        single, double, higher = channels.zeros(), channels.zeros(), channels.zeros()
-        throughput = channels.zeros() + 1.0
-        alive = mi.Bool(active) & ~misses
+            radiance.direct = dr.select(misses, e_sun * self._solar_disk(d), radiance.direct)
+        camera = PathVertex(p, h, d, channels.zeros() + 1.0, mi.UInt32(0), mi.Bool(active) & ~misses)
 
-        light, sun_disk, p, d, h, throughput, alive = self._line_segment(
-            sampler, channels, e_sun, p, d, h, throughput, alive, camera=True,
-            rising_only=self.geometry.h0 == 0.0, sunlight=orders != "multiple")
-        direct += sun_disk
-        single += light
+        light, sun_disk, path = self._line_segment(sampler, channels, e_sun, camera, camera=True,
+                                                   rising_only=self.geometry.h0 == 0.0,
+                                                   sunlight=orders != "multiple")
+        radiance.direct += sun_disk
+        radiance.single += light
         if orders != "single":
-            double, higher = self._scattered_light(sampler, channels, e_sun, p, d, h, throughput, alive)
-        return [direct, single, double, higher]
+            self._scattered_light(sampler, channels, e_sun, path, radiance)
+        return radiance.by_order()
 
     @dr.syntax
-    def _scattered_light(self, sampler, channels, e_sun, p, d, h, throughput, alive):
-        """Orders 2 and >= 3 of a line-integral path that goes on from its first vertex (point p
-        at altitude h, direction d, throughput): one loop iteration per segment."""
-        double, higher = channels.zeros(), channels.zeros()
-        depth = mi.UInt32(1)
-        alive &= depth < self.max_depth
+    def _scattered_light(self, sampler, channels, e_sun, path, radiance):
+        """Orders 2 and >= 3 of a line-integral ``path`` that goes on from its first vertex
+        (depth 1), added to ``radiance``: one loop iteration per segment."""
+        path.alive &= path.depth < self.max_depth
 
-        while dr.hint(alive, label="atmosphere line-integral path"):
-            light, _, p, d, h, throughput, alive = self._line_segment(
-                sampler, channels, e_sun, p, d, h, throughput, alive, camera=False, rising_only=False)
-            double = dr.select(depth == 1, double + light, double)
-            higher = dr.select(depth >= 2, higher + light, higher)
-            depth += 1
+        while dr.hint(path.alive, label="atmosphere line-integral path"):
+            light, _, path = self._line_segment(sampler, channels, e_sun, path, camera=False, rising_only=False)
+            radiance.file(path.depth, light, True)      # scattered (or reflected) path.depth times
             # Russian roulette once the largest channel throughput falls below LINE_ROULETTE_THROUGHPUT
-            survival = dr.minimum(dr.max(dr.detach(throughput), axis=0) / LINE_ROULETTE_THROUGHPUT, 1.0)
-            roulette = alive & (depth >= LINE_ROULETTE_DEPTH)
+            survival = dr.minimum(dr.max(dr.detach(path.throughput), axis=0) / LINE_ROULETTE_THROUGHPUT, 1.0)
+            roulette = path.alive & (path.depth >= LINE_ROULETTE_DEPTH)
             survives = sampler.next_1d() < survival
-            throughput = dr.select(roulette & survives, throughput / survival, throughput)
-            alive &= ~(roulette & ~survives) & (depth < self.max_depth)
+            path.throughput = dr.select(roulette & survives, path.throughput / survival, path.throughput)
+            path.alive &= ~(roulette & ~survives) & (path.depth < self.max_depth)
 
-        return double, higher
-
-    def _line_segment(self, sampler, channels, e_sun, p, d, h, throughput, alive, camera, rising_only,
-                      sunlight=True):
-        """One segment of a line-integral path from vertex ``p`` (altitude ``h``) along ``d``.
-        Returns (light filed under this segment's order, the solar disk seen through it when
-        ``camera``, and the next vertex: point, direction, altitude, throughput, alive). Without
+    def _line_segment(self, sampler, channels, e_sun, path, camera, rising_only, sunlight=True):
+        """One segment of a line-integral ``path`` (a :class:`PathVertex`) from its vertex along
+        its direction. Returns (the light gathered along the segment: sunlight scattered once on
+        it, or reflected by the ground at its end, so path.depth + 1 events; the solar disk seen
+        through it when ``camera``; the path at its next vertex, one event deeper). Without
         ``sunlight`` the segment's light is not computed (it is 0): only where the path goes on."""
         geometry, optics, sun = self.geometry, self.optics, self.sun
+        p, d, h, throughput, alive = path.point, path.direction, path.altitude, path.throughput, path.alive
         t_ground = geometry.distance_to_ground(p, d, h)
         t_top = geometry.distance_to_top(p, d, h)
         on_ground = t_ground < t_top
@@ -619,11 +673,10 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         air_throughput = throughput * weight * phase_weight / dr.maximum(p_air, 1e-30)
         d_ground = mi.Frame3f(up).to_world(mi.warp.square_to_cosine_hemisphere(u_direction))
         ground_throughput = throughput * transmittance * channels.albedo / dr.maximum(1.0 - p_air, 1e-30)
-        p = dr.select(in_air, x, ground)
-        h = dr.select(in_air, hx, 0.0)
-        d = dr.select(in_air, d_air, d_ground)
-        throughput = dr.select(in_air, air_throughput, ground_throughput)
-        return light, sun_disk, p, d, h, throughput, alive
+        next_vertex = PathVertex(dr.select(in_air, x, ground), dr.select(in_air, hx, 0.0),
+                                 dr.select(in_air, d_air, d_ground),
+                                 dr.select(in_air, air_throughput, ground_throughput), path.depth + 1, alive)
+        return light, sun_disk, next_vertex
 
     def _scatter_direction(self, parts, sigma_s, d, u_choice, u_direction):
         """The direction a line-integral path takes at a scattering event (incident direction d)
@@ -661,28 +714,25 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         geometry, optics, sun = self.geometry, self.optics, self.sun
         channels = optics.channel_coefficients(indices)
         e_sun = sun.channel_irradiance(indices)
-        direct, single, double, higher = channels.zeros(), channels.zeros(), channels.zeros(), channels.zeros()
+        radiance = RadianceByOrder.zeros(channels)
 
         # -- the camera ray; an observer above the atmosphere first moves to where it enters ------
         d = mi.Vector3f(direction)
         p, h, misses = self._enter_atmosphere(origin, d, active)
-        direct = dr.select(misses, e_sun * self._solar_disk(d), direct)
+        radiance.direct = dr.select(misses, e_sun * self._solar_disk(d), radiance.direct)
 
-        # -- the path: its vertex p (altitude h), direction d, throughput, scattering events so far
-        throughput = channels.zeros() + 1.0
-        alive = mi.Bool(active) & ~misses
-        depth = mi.UInt32(0)
+        path = PathVertex(p, h, d, channels.zeros() + 1.0, mi.UInt32(0), mi.Bool(active) & ~misses)
         segment = self._segment(p, d, h)
         shadow = ShadowRay(mi.Bool(False), mi.Point3f(p), mi.Float(h), mi.Vector3f(d), mi.Float(0.0),
                            channels.zeros(), channels.zeros(), mi.UInt32(0))
 
-        while dr.hint(alive | shadow.active, label="atmosphere path"):
+        while dr.hint(path.alive | shadow.active, label="atmosphere path"):
             # -- one tracking step along the current ray (the shadow ray if one is in flight) ----
             in_shadow = shadow.active
-            x = dr.select(in_shadow, shadow.point, p)
-            w = dr.select(in_shadow, shadow.direction, d)
+            x = dr.select(in_shadow, shadow.point, path.point)
+            w = dr.select(in_shadow, shadow.direction, path.direction)
             length = dr.select(in_shadow, shadow.remaining, segment.remaining)
-            hx = dr.select(in_shadow, shadow.altitude, h)
+            hx = dr.select(in_shadow, shadow.altitude, path.altitude)
             hx_end = dr.select(in_shadow, geometry.H, segment.h_end)
             # The majorant holds over the next *stretch* of the segment only: as far as the ray
             # descends by ``majorant_drop``. A ray coming down from high up would otherwise
@@ -696,7 +746,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             # CAMERA_MAX_BOOST x the majorant. Each carries a sun connection, which is what makes
             # single scattering converge; thinning the candidates with probability
             # majorant / rate recovers the tracking process exactly.
-            camera = ~in_shadow & (depth == 0)
+            camera = ~in_shadow & (path.depth == 0)
             rate = dr.select(camera, dr.clip(CAMERA_SUN_CONNECTIONS / dr.maximum(length, 1e-3), majorant,
                                              CAMERA_MAX_BOOST * majorant), majorant)
             t = -dr.log(1.0 - sampler.next_1d()) / rate
@@ -722,88 +772,89 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             shadow.altitude = dr.select(shadow_moves, hx, shadow.altitude)
             shadow.remaining = dr.select(shadow_moves, shadow.remaining - t, shadow.remaining)
             shadow_done = in_shadow & ((~collides & ~stretch_done) | (dr.max(shadow.transmittance, axis=0) <= 0.0))
-            contribution = shadow.pending * shadow.transmittance
-            single = dr.select(shadow_done & (shadow.order == 1), single + contribution, single)
-            double = dr.select(shadow_done & (shadow.order == 2), double + contribution, double)
-            higher = dr.select(shadow_done & (shadow.order >= 3), higher + contribution, higher)
-            tracking_path = alive & ~in_shadow
+            radiance.file(shadow.order, shadow.pending * shadow.transmittance, shadow_done)
+            tracking_path = path.alive & ~in_shadow
             shadow.active = in_shadow & ~shadow_done
 
             # -- path: a tentative collision in the air ----------------------------------------------
             candidate = collides & tracking_path
             moves_on = tracking_path & stretch_done
             reaches_end = tracking_path & ~candidate & ~stretch_done
-            p = dr.select(candidate | moves_on, x, p)
-            h = dr.select(candidate | moves_on, hx, h)
+            path.point = dr.select(candidate | moves_on, x, path.point)
+            path.altitude = dr.select(candidate | moves_on, hx, path.altitude)
             segment.remaining = dr.select(candidate | moves_on, segment.remaining - t, segment.remaining)
             # Next-event estimation at *every* candidate point, weighted by the expected value of
             # the real-scattering branch: P_s * (w sigma_s / (mu P_s)) = w sigma_s / mu, with mu
             # the candidates' rate. The event decision below then only decides how the path goes on.
             sun_direction, sun_factor = sun.sample_direction(sampler.next_2d())
-            scattered_sunlight = throughput * optics.phase(parts, sigma_s, dr.dot(d, sun_direction)) * (
-                sigma_s / rate)
+            scattered_sunlight = (path.throughput * optics.phase(parts, sigma_s, dr.dot(path.direction, sun_direction))
+                                  * (sigma_s / rate))
             collides = candidate & (sampler.next_1d() * rate < majorant)
             null_weight = dr.maximum(majorant - sigma_t, 0.0)
-            a_scatter = dr.max(dr.detach(throughput * sigma_s), axis=0)
-            a_null = dr.max(dr.detach(throughput * null_weight), axis=0)
+            a_scatter = dr.max(dr.detach(path.throughput * sigma_s), axis=0)
+            a_null = dr.max(dr.detach(path.throughput * null_weight), axis=0)
             p_scatter = a_scatter / dr.maximum(a_scatter + a_null, 1e-30)
             scatters = collides & (sampler.next_1d() < p_scatter)
             is_null = collides & ~scatters
+            throughput = path.throughput
             throughput = dr.select(scatters, throughput * sigma_s / (majorant * p_scatter), throughput)
-            throughput = dr.select(is_null, throughput * null_weight / (majorant * (1.0 - p_scatter)), throughput)
+            path.throughput = dr.select(is_null, throughput * null_weight / (majorant * (1.0 - p_scatter)), throughput)
 
             # -- path: the segment ends on the ground (a Lambertian vertex) or in space -----------
-            p = dr.select(reaches_end, p + segment.remaining * d, p)
-            h = dr.select(reaches_end, segment.h_end, h)
+            path.point = dr.select(reaches_end, path.point + segment.remaining * path.direction, path.point)
+            path.altitude = dr.select(reaches_end, segment.h_end, path.altitude)
             on_ground = reaches_end & segment.on_surface
             escapes = reaches_end & ~segment.on_surface
-            direct = dr.select(escapes & (depth == 0), direct + throughput * e_sun * self._solar_disk(d), direct)
-            alive &= ~escapes
+            sun_seen = path.throughput * e_sun * self._solar_disk(path.direction)
+            radiance.direct = dr.select(escapes & (path.depth == 0), radiance.direct + sun_seen, radiance.direct)
+            path.alive &= ~escapes
             # A surface vertex: the planet's ground, or an object (normal offset: no self-hits).
             on_object = on_ground & segment.on_object
-            up = dr.select(on_object, segment.object_normal, geometry.up(p))
-            p = dr.select(on_object, p + up * (OBJECT_OFFSET * (1.0 + dr.max(dr.abs(p)))), p)
+            up = dr.select(on_object, segment.object_normal, geometry.up(path.point))
+            offset = up * (OBJECT_OFFSET * (1.0 + dr.max(dr.abs(path.point))))
+            path.point = dr.select(on_object, path.point + offset, path.point)
             albedo = dr.select(on_object, channels.zeros() + segment.object_albedo, channels.albedo)
-            reflected_sunlight = throughput * albedo * (dr.maximum(dr.dot(up, sun_direction), 0.0) / math.pi)
+            reflected_sunlight = path.throughput * albedo * (dr.maximum(dr.dot(up, sun_direction), 0.0) / math.pi)
 
             # -- start the shadow ray of this step's next-event estimate -----------------------------
             estimate = candidate | on_ground
             sunlight = dr.select(on_ground, reflected_sunlight, scattered_sunlight) * e_sun * sun_factor
             estimate &= dr.max(dr.detach(sunlight), axis=0) > 0.0   # nothing to connect: no shadow ray
-            visible = estimate & (geometry.distance_to_ground(p, sun_direction, h) == dr.inf)
+            visible = estimate & (geometry.distance_to_ground(path.point, sun_direction, path.altitude) == dr.inf)
             if dr.hint(self.objects is not None, mode="scalar"):
-                visible &= ~self.objects.ray_test(mi.Ray3f(p, sun_direction), visible)
+                visible &= ~self.objects.ray_test(mi.Ray3f(path.point, sun_direction), visible)
             shadow.active |= visible
-            shadow.point = dr.select(visible, p, shadow.point)
-            shadow.altitude = dr.select(visible, h, shadow.altitude)
+            shadow.point = dr.select(visible, path.point, shadow.point)
+            shadow.altitude = dr.select(visible, path.altitude, shadow.altitude)
             shadow.direction = dr.select(visible, sun_direction, shadow.direction)
-            shadow.remaining = dr.select(visible, geometry.distance_to_top(p, sun_direction, h), shadow.remaining)
+            shadow.remaining = dr.select(visible, geometry.distance_to_top(path.point, sun_direction, path.altitude),
+                                         shadow.remaining)
             shadow.transmittance = dr.select(visible, 1.0, shadow.transmittance)
             shadow.pending = dr.select(visible, sunlight, shadow.pending)
-            shadow.order = dr.select(visible, depth + 1, shadow.order)
+            shadow.order = dr.select(visible, path.depth + 1, shadow.order)
             vertex = scatters | on_ground
-            depth = dr.select(vertex, depth + 1, depth)
+            path.depth = dr.select(vertex, path.depth + 1, path.depth)
 
             # -- vertex: continue the path (phase sampling in the air, cosine on the ground) -------
             u_component = sampler.next_1d()
             u_direction = sampler.next_2d()
             mu, pdf = optics.sample_phase(parts, sigma_s, u_component, u_direction.x)
-            d_air = direction_with_cosine(d, mu, u_direction.y)
+            d_air = direction_with_cosine(path.direction, mu, u_direction.y)
             d_ground = mi.Frame3f(up).to_world(mi.warp.square_to_cosine_hemisphere(u_direction))
-            throughput = dr.select(scatters, throughput * optics.phase(parts, sigma_s, mu) / pdf, throughput)
-            throughput = dr.select(on_ground, throughput * albedo, throughput)
-            d = dr.select(scatters, d_air, dr.select(on_ground, d_ground, d))
-            segment = dr.select(vertex, self._segment(p, d, h), segment)
+            throughput = dr.select(scatters, path.throughput * optics.phase(parts, sigma_s, mu) / pdf, path.throughput)
+            path.throughput = dr.select(on_ground, throughput * albedo, throughput)
+            path.direction = dr.select(scatters, d_air, dr.select(on_ground, d_ground, path.direction))
+            segment = dr.select(vertex, self._segment(path.point, path.direction, path.altitude), segment)
 
             # -- Russian roulette and termination ------------------------------------------------
-            survival = dr.minimum(dr.max(dr.detach(throughput), axis=0), 0.95)
-            roulette = vertex & (depth >= ROULETTE_DEPTH)
+            survival = dr.minimum(dr.max(dr.detach(path.throughput), axis=0), 0.95)
+            roulette = vertex & (path.depth >= ROULETTE_DEPTH)
             survives = sampler.next_1d() < survival
-            throughput = dr.select(roulette & survives, throughput / survival, throughput)
-            alive &= ~(roulette & ~survives)
-            alive &= (depth < self.max_depth) & (dr.max(throughput, axis=0) > 0.0)
+            path.throughput = dr.select(roulette & survives, path.throughput / survival, path.throughput)
+            path.alive &= ~(roulette & ~survives)
+            path.alive &= (path.depth < self.max_depth) & (dr.max(path.throughput, axis=0) > 0.0)
 
-        return [direct, single, double, higher]
+        return radiance.by_order()
 
 
 def register():

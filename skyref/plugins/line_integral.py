@@ -20,6 +20,11 @@ proportional to a grey proxy of sigma_s(t) T(0, t) (a panel by its quadrature ma
 point uniform in the panel's variable u), weighted by the exact sigma_s(t) T(0, t) / pdf(t) per channel — or, if the
 segment ends on the ground, from the ground with probability proportional to its grey
 T(0, L) x albedo. Every path scatters: none is wasted on light that leaves the atmosphere.
+
+References
+----------
+L. L. Carter and E. D. Cashwell, "Particle-Transport Simulation with the Monte Carlo Method",
+ERDA Critical Review Series TID-26607 (1975) (forced collisions).
 """
 
 from __future__ import annotations
@@ -29,6 +34,8 @@ import mitsuba as mi
 
 from skyref.plugins.drjit_namespace import xp
 from skyref.plugins.quadrature import NODES_PER_PANEL, GaussLegendreRule, insert_sorted, ordered_breakpoints
+
+__all__ = ["PANEL_THICKNESS", "OPTICAL_DEPTH_BREAKS", "grey_sum", "SegmentQuadrature", "LineIntegral"]
 
 #: Optical thickness (most transparent channel) above which a panel's nodes are spaced evenly
 #: in that channel's transmittance.

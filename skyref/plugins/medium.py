@@ -72,7 +72,12 @@ from skyref.atmosphere import RGB_WAVELENGTHS_NM
 from skyref.plugins.geometry import SphericalShell
 from skyref.plugins.optics import AtmosphereOptics, atmosphere_from_property
 from skyref.plugins.phase import ChannelMap, is_atmosphere_phase, phase_class
+from skyref.plugins.phase import register as register_phase
 from skyref.plugins.variant_class import variant_class
+from skyref.validation import check_choice, check_number
+
+__all__ = ["PLUGIN_NAME", "MAJORANT_SAFETY", "MAJORANT_FLOOR", "SPECTRAL_GRID_NM", "MAJORANT_MODES",
+           "default_wavelengths", "AtmosphereMediumMethods", "medium_class", "register"]
 
 #: Name under which the medium is registered (see the module docstring).
 PLUGIN_NAME = "atmosphere_medium"
@@ -121,8 +126,6 @@ class AtmosphereMediumMethods:
                   majorant: str = "segment"):
         """Set the atmosphere (Atmosphere, preset name or JSON), the wavelength grid (nm;
         default :func:`default_wavelengths`), the observer's altitude (m) and the majorant mode."""
-        from skyref.validation import check_choice, check_number
-
         atmosphere = atmosphere_from_property(atmosphere)
         self.majorant_mode = check_choice("majorant", majorant, MAJORANT_MODES)
         h0 = check_number("observer_altitude_m", observer_altitude_m, 0.0, 1.0e8)
@@ -256,8 +259,6 @@ def __getattr__(name):
 
 def register():
     """Register ``atmosphere_medium`` and ``atmosphere_phase`` for the current variant."""
-    from skyref.plugins import phase
-
-    phase.register()
+    register_phase()
     cls = medium_class()
     mi.register_medium(PLUGIN_NAME, lambda props: cls(props))

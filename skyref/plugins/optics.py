@@ -35,6 +35,8 @@ from skyref.atmosphere.constituents import angstrom_extinction
 from skyref.atmosphere.spectra import DOBSON_UNIT_PER_M2, ConstantSpectrum
 from skyref.plugins.drjit_namespace import xp
 
+__all__ = ["atmosphere_from_property", "ConstituentOptics", "AtmosphereOptics", "direction_with_cosine", "PathChannels"]
+
 
 def atmosphere_from_property(value) -> "Atmosphere":
     """An Atmosphere from a preset name, its JSON, an Atmosphere or a dict."""
@@ -83,7 +85,6 @@ class ConstituentOptics:
                 else (constituent.cross_section(wavelengths_nm) * constituent.number_density_per_m3).astype(np.float32))
             if constituent.column_du is not None:
                 self.params["column_du"] = _opaque(constituent.column_du)
-        self.phase_kind = constituent.phase.kind if constituent.phase is not None else None
         if hasattr(constituent.phase, "cosines"):       # a tabulated phase function's device tables
             self.tables["phase_cosines"] = mi.Float(np.asarray(constituent.phase.cosines, np.float32))
             self.tables["phase_values"] = mi.Float(np.asarray(constituent.phase.values, np.float32))

@@ -40,6 +40,8 @@ from skyref.errors import ParameterError
 from skyref.plugins.optics import direction_with_cosine
 from skyref.plugins.variant_class import is_instance, variant_class
 
+__all__ = ["ChannelMap", "AtmospherePhaseMethods", "is_atmosphere_phase", "phase_class", "register"]
+
 
 class ChannelMap:
     """How a Mitsuba ``Spectrum``'s channels map onto an :class:`AtmosphereOptics` grid, and the

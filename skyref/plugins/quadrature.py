@@ -21,11 +21,19 @@ rises (from the ground, or with mu >= 0) needs only the up crossings.
 Each panel gets the same n-point Gauss–Legendre rule, exact for polynomials of degree 2n - 1;
 within a panel, the optical depth from the panel's start to each node uses the rule's
 cumulative (spectral integration) matrix, exact for degree n - 1.
+
+References
+----------
+L. Greengard, "Spectral integration and two-point boundary value problems", SIAM J. Numer. Anal.
+28(4) (1991) (the cumulative, spectral integration matrix).
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+__all__ = ["NODES_PER_PANEL", "panel_levels", "GaussLegendreRule", "level_crossings", "ordered_breakpoints",
+           "insert_sorted"]
 
 #: Nodes per panel of the kernels' rule (``tests/test_line_integral.py``: single scattering
 #: within 1e-4 of an 8-node rule on panels split in three, clear sky, zenith to horizon).

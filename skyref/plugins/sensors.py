@@ -27,6 +27,8 @@ import mitsuba as mi  # noqa: E402
 from skyref import projection  # noqa: E402
 from skyref.plugins.drjit_namespace import xp as DRJIT_NAMESPACE  # noqa: E402
 
+__all__ = ["register_sensors"]
+
 #: Variants whose sensors are registered (a plugin is registered per variant).
 _REGISTERED = set()
 

@@ -15,10 +15,16 @@ iterations of one symbolic loop, which correlates the bounces of a path and bias
 scattering, see ``docs/design.md``). Batches are independent scrambles: their means are
 independent, unbiased estimates, and their spread is an honest error bar.
 
-References: I. M. Sobol' (1967); S. Joe and F. Y. Kuo, "Constructing Sobol sequences with
-better two-dimensional projections", SIAM J. Sci. Comput. 30 (2008) (the second dimension's
-primitive polynomial x + 1); B. Burley, "Practical Hash-based Owen Scrambling", JCGT 9(4) (2020)
-(nested uniform scrambling by a Laine–Karras-style hash, index shuffling, padding).
+References
+----------
+I. M. Sobol', "On the distribution of points in a cube and the approximate evaluation of
+integrals", USSR Comput. Math. Math. Phys. 7(4) (1967).
+
+S. Joe and F. Y. Kuo, "Constructing Sobol sequences with better two-dimensional projections",
+SIAM J. Sci. Comput. 30 (2008) (the second dimension's primitive polynomial x + 1).
+
+B. Burley, "Practical Hash-based Owen Scrambling", JCGT 9(4) (2020) (nested uniform scrambling
+by a Laine–Karras-style hash, index shuffling, padding).
 """
 
 from __future__ import annotations

@@ -13,8 +13,10 @@ their optical depth is not tabulated (the line integral decides shadow geometric
 
 Plane-parallel slab: the vertical column above the point (closed form per profile) / mu_s.
 
-References: E. Bruneton, "A Qualitative and Quantitative Evaluation of 8 Clear Sky Models",
-IEEE TVCG 2017, and its precomputed-scattering code (transmittance texture layout).
+References
+----------
+E. Bruneton, "A Qualitative and Quantitative Evaluation of 8 Clear Sky Models", IEEE TVCG 23
+(2017), and its precomputed-scattering code (transmittance texture layout).
 """
 
 from __future__ import annotations
@@ -28,6 +30,8 @@ import numpy as np
 
 from skyref.plugins.drjit_namespace import xp
 from skyref.plugins.quadrature import GaussLegendreRule, level_crossings, ordered_breakpoints, panel_levels
+
+__all__ = ["TABLE_SIZE", "TABLE_NODES", "unit_optical_depth", "table_coordinates", "SunOpticalDepth"]
 
 #: Table size (x_r, x_mu). Against the direct quadrature at random points and sun directions
 #: (``tests/test_line_integral.py``), the transmittance at 440 nm differs by at most 3e-5

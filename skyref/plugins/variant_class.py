@@ -9,6 +9,8 @@ the base through ``self._mitsuba_base`` instead of ``super()``.
 
 import mitsuba as mi
 
+__all__ = ["variant_class", "is_instance"]
+
 _CLASSES = {}
 
 

@@ -39,9 +39,14 @@ import numpy as np
 
 from skyref.atmosphere import ConstantSpectrum, solar_irradiance
 from skyref.errors import ParameterError
+from skyref.plugins import medium
 from skyref.plugins.medium import default_wavelengths
 from skyref.plugins.optics import atmosphere_from_property
 from skyref.plugins.variant_class import variant_class
+from skyref.scene import direction_from_angles
+
+__all__ = ["GROUND_CLEARANCE_M", "MEDIUM_ID", "register", "sensor_origin", "stock_volpath_scene", "directions_sensor",
+           "DirectionsSensorMethods", "directions_sensor_class"]
 
 #: Height of the sensor above the ground when the observer stands on it, m (see module notes).
 GROUND_CLEARANCE_M = 1.0
@@ -56,8 +61,6 @@ def register():
     current variant (idempotent)."""
     if mi.variant() in _registered:
         return
-    from skyref.plugins import medium
-
     medium.register()
     cls = directions_sensor_class()
     mi.register_sensor("skyref_directions", lambda props: cls(props))
@@ -87,10 +90,6 @@ def stock_volpath_scene(atmosphere, sun_zenith_deg: float, sun_azimuth_deg: floa
     a preset name or its JSON; angles in degrees (azimuth clockwise from north); the sensor is
     given ``medium`` = the atmosphere. ``max_depth`` counts scattering events as in the
     integrator."""
-    from skyref.scene import direction_from_angles
-
-    from skyref.plugins import medium
-
     register()
     atmosphere = atmosphere_from_property(atmosphere)
     h0 = float(observer_altitude_m)
