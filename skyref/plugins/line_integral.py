@@ -79,20 +79,25 @@ class LineIntegral:
 
     # --- the segment's panels ----------------------------------------------------------------
 
-    def _panels(self, channels, p, d, h, length, sun, rising_only):
-        """Panel boundaries: the level crossings; where the segment enters and leaves the
-        planet's shadow; and where it has crossed OPTICAL_DEPTH_BREAKS of optical depth in its
-        most transparent channel at the extinction of its start (an optically thick segment, e.g. a
-        horizontal ray through hazy air, loses most of its light within one level panel)."""
+    def _panels(self, channels, p, d, h, length, sun, rising_only, sunlight):
+        """Panel boundaries: the level crossings; where it has crossed OPTICAL_DEPTH_BREAKS of
+        optical depth in its most transparent channel at the extinction of its start (an
+        optically thick segment, e.g. a horizontal ray through hazy air, loses most of its light
+        within one level panel); and, for the ``sunlight`` along it, where the segment enters and
+        leaves the planet's shadow. Returns the panels and, with ``sunlight``, whether each is lit
+        (else None)."""
         crossings = [self.geometry.level_crossings(p, d, h, level) for level in self.levels]
         breakpoints = ordered_breakpoints(crossings, length, rising_only, xp)
-        t_in, t_out = self.geometry.shadow_interval(p, d, length, sun)
-        breakpoints = insert_sorted(insert_sorted(breakpoints, t_in, xp), t_out, xp)
+        if sunlight:
+            t_in, t_out = self.geometry.shadow_interval(p, d, length, sun)
+            breakpoints = insert_sorted(insert_sorted(breakpoints, t_in, xp), t_out, xp)
         rho = [c.density(h) for c in self.optics.components]
         inv_extinction = dr.rcp(dr.maximum(dr.detach(dr.min(channels.optical_depth(rho), axis=0)), 1e-30))
         for tau in OPTICAL_DEPTH_BREAKS:
             breakpoints = insert_sorted(breakpoints, dr.minimum(tau * inv_extinction, length), xp)
         panels = list(zip(breakpoints[:-1], breakpoints[1:]))
+        if not sunlight:
+            return panels, [None] * len(panels)
         lit = [~((0.5 * (a + b) > t_in) & (0.5 * (a + b) < t_out)) for a, b in panels]
         return panels, lit
 
@@ -113,7 +118,7 @@ class LineIntegral:
         elsewhere: no sun optical depths, no per-channel exponentials) and the sunlight is 0."""
         optics, rule = self.optics, self.rule
         components = optics.components
-        panels, lit = self._panels(channels, p, d, h, length, sun, rising_only)
+        panels, lit = self._panels(channels, p, d, h, length, sun, rising_only, sunlight)
         cos_scatter = dr.dot(d, sun)
         phase = [None if s is None else c.phase(cos_scatter)
                  for c, (s, _) in zip(components, channels.coefficients)]
