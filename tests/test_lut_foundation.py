@@ -258,3 +258,46 @@ def test_transmittance_matches_the_path_tracer(mi, sun_zenith, spp):
     assert np.all(se / estimate < 2.5e-3)
     assert np.all(np.abs(z) < 4.0)
 
+
+
+# Small tables: the test is about kernels, not accuracy.
+SMALL_TABLES = {
+    "bruneton2017": dict(scattering_orders=2, r_size=8, mu_size=16, mu_s_size=8, nu_size=4, transmittance_width=32,
+                         transmittance_height=8, irradiance_width=16, irradiance_height=4, integration_samples=10),
+    "elek2009": dict(scattering_size=(8, 16, 8), scattering_orders=2, gathering_samples=8,
+                     aerial_perspective_size=(8, 8, 8), transmittance_size=(32, 8), integration_samples=10),
+    "hillaire2020": dict(transmittance_size=(32, 8), transmittance_samples=20, multiple_scattering_size=(8, 8),
+                         multiple_scattering_directions=16, multiple_scattering_samples=8, sky_view_size=(16, 12),
+                         sky_view_samples=(2, 6)),
+}
+
+
+@pytest.mark.parametrize("name", sorted(SMALL_TABLES))
+def test_new_views_reuse_the_compiled_lookup_kernels(mi, name):
+    """Four views (other sun, other observer altitude) launch the same kernels, by hash: nothing
+    per view is baked into a kernel, and no kernel is specialised on the alignment of its input
+    arrays (Dr.Jit emits aligned vector loads when an array happens to be 64-byte aligned, and
+    the lookups compiled again on about every call, ~1 s for 2048 directions)."""
+    import drjit as dr
+
+    from skyref.atmosphere import preset
+    from skyref.lut import lut_method
+
+    method = lut_method(name, preset("bruneton2017"), "rgb", **SMALL_TABLES[name])
+    method.precompute()
+    rng = np.random.default_rng(5)
+    directions = rng.normal(size=(2048, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    hashes = []
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        for zenith, altitude in [(30.0, 0.0), (50.0, 100.0), (70.0, 1000.0), (85.0, 5.0)]:
+            sun = np.array([np.sin(np.radians(zenith)), 0.0, np.cos(np.radians(zenith))])
+            method.prepare_view(sun, altitude)
+            dr.kernel_history()                             # clears the history
+            method.radiance(directions, sun, altitude)
+            hashes.append(sorted(k["hash"] for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT))
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    assert hashes[0], "no lookup kernel was launched"
+    assert all(h == hashes[0] for h in hashes[1:]), hashes

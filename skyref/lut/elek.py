@@ -420,11 +420,8 @@ class Elek2009(LutMethod):
 
         ground_distance = planet.distance_to_bottom(r0, mu0, R)
         reflected = self._ground_reflection(r0, mu_s0, nu, ground_distance)
-        if self.half_table and not bool(dr.any(hits)):
-            inscattered = transmittance = [mi.Float64(0.0)] * self.channels
-        elif self.half_table:
-            volume = self._aerial_perspective(_single_value(r, "r"), _single_value(mu_s, "mu_s"))
-            inscattered, transmittance = volume.lookup(mu, nu, entry + ground_distance)
+        if self.half_table:          # the view's volume, built by _prepare_view
+            inscattered, transmittance = self._volume.lookup(mu, nu, entry + ground_distance)
         else:
             ground_coords = self._scattering_coordinates(r0, mu0, mu_s0, mi.Bool(True))
             inscattered = [phase_rayleigh * s_r + phase_mie * s_m for s_r, s_m in
@@ -435,17 +432,12 @@ class Elek2009(LutMethod):
         return [dr.select(enters, float(e) * dr.select(hits, g, s), 0.0)
                 for e, g, s in zip(self.solar_irradiance, ground, sky)]
 
-    def _aerial_perspective(self, r: float, mu_s: float) -> "AerialPerspectiveVolume":
-        """The volume for an observer at radius ``r`` and sun cosine ``mu_s``, kept until the
-        observer or the sun changes."""
-        key = (r, mu_s)
-        if self._volume_key != key:
-            self._volume, self._volume_key = AerialPerspectiveVolume(self, r, mu_s), key
-        return self._volume
-
     def _prepare_view(self, r: float, mu_s: float):
-        if self.half_table:
-            self._aerial_perspective(r, mu_s)
+        """The aerial-perspective volume for an observer at radius ``r`` and sun cosine ``mu_s``
+        (half table only), kept until the observer or the sun changes."""
+        key = (r, mu_s)
+        if self.half_table and self._volume_key != key:
+            self._volume, self._volume_key = AerialPerspectiveVolume(self, r, mu_s), key
 
     def _ground_reflection(self, r, mu_s, nu, distance):
         """Radiance of the Lambertian ground per unit solar irradiance where the ray from radius
@@ -457,12 +449,9 @@ class Elek2009(LutMethod):
         return [self.optics.ground_albedo(mi.UInt32(k)) / math.pi * t * cosine for k, t in enumerate(sun)]
 
 
-def _single_value(values, name: str) -> float:
-    """The one value a Float64 array holds (the aerial-perspective volume is per observer and sun)."""
-    unique = np.unique(values.numpy())
-    if unique.size != 1:
-        raise ValueError(f"{name}: the aerial-perspective volume needs one observer and one sun per call")
-    return float(unique[0])
+def _opaque(value: float) -> mi.Float64:
+    """A per-view value as an opaque Float64 (not baked into kernels)."""
+    return dr.opaque(mi.Float64, value)
 
 
 class AerialPerspectiveVolume:
@@ -472,19 +461,25 @@ class AerialPerspectiveVolume:
 
     def __init__(self, method: Elek2009, r: float, mu_s: float):
         optics = method.optics
-        self.method, self.r, self.mu_s = method, float(r), float(mu_s)
+        self.method = method
         R, Rt = optics.bottom_radius, optics.top_radius
-        self.mu_horizon = -math.sqrt(max(self.r * self.r - R * R, 0.0)) / self.r
+        #: whether the observer is above the atmosphere (the only view-dependent branch)
+        self.outside = float(r) > Rt
+        # The view's values enter kernels as opaque Float64s: a new observer or sun reuses the
+        # compiled kernels (as literals, each view compiled 17 of its 18 kernels again).
+        r, mu_s = float(r), float(mu_s)
+        self.r, self.mu_s = _opaque(r), _opaque(mu_s)
+        self.sin_s = _opaque(math.sqrt(max(1.0 - mu_s * mu_s, 0.0)))
+        self.mu_horizon = _opaque(-math.sqrt(max(r * r - R * R, 0.0)) / r)
         # The longest in-atmosphere path to the ground: along the horizon ray.
-        self.depth = max(math.sqrt(max(min(self.r, Rt) ** 2 - R * R, 0.0)), 1.0)
+        self.depth = _opaque(max(math.sqrt(max(min(r, Rt) ** 2 - R * R, 0.0)), 1.0))
         n_mu, n_phi, n_d = method.aerial_perspective_size
         channels = method.channels
         lane = dr.arange(mi.UInt32, n_mu * n_phi * n_d * channels)
         channel = lane % channels
         cell = lane // channels
         i_d, i_phi, i_mu = cell % n_d, (cell // n_d) % n_phi, cell // (n_d * n_phi)
-        mu = dr.clip(mu_from_view_unit(mi.Float64(i_mu) / (n_mu - 1), mi.Float64(self.mu_horizon), mi.Bool(True)),
-                     -1.0, 1.0)
+        mu = dr.clip(mu_from_view_unit(mi.Float64(i_mu) / (n_mu - 1), self.mu_horizon, mi.Bool(True)), -1.0, 1.0)
         nu = self._nu(mu, mi.Float64(i_phi) * (math.pi / (n_phi - 1)))
         depth = self.depth * dr.square(mi.Float64(i_d) / (n_d - 1))
         inscattered, transmittance = self._integrate(mu, nu, depth, channel)
@@ -494,13 +489,12 @@ class AerialPerspectiveVolume:
 
     def _nu(self, mu, phi):
         """Cosine of the view–sun angle of a view with zenith cosine mu at azimuth phi from the sun."""
-        return dr.clip(mu * self.mu_s + dr.safe_sqrt(1.0 - mu * mu) * math.sqrt(max(1.0 - self.mu_s ** 2, 0.0))
-                       * dr.cos(phi), -1.0, 1.0)
+        return dr.clip(mu * self.mu_s + dr.safe_sqrt(1.0 - mu * mu) * self.sin_s * dr.cos(phi), -1.0, 1.0)
 
     def _entry(self, mu):
         """Distance from the observer to where the ray enters the atmosphere (0 inside it)."""
         Rt = self.method.optics.top_radius
-        if self.r <= Rt:
+        if not self.outside:
             return 0.0 * mu
         return dr.maximum(-self.r * mu - dr.safe_sqrt(self.r * self.r * (mu * mu - 1.0) + Rt * Rt), 0.0)
 
@@ -510,7 +504,7 @@ class AerialPerspectiveVolume:
         from the atmosphere entry to ``depth`` beyond it (stopping at the ground)."""
         method, optics = self.method, self.method.optics
         n = method.integration_samples
-        r = mi.Float64(self.r)
+        r = self.r
         start = self._entry(mu)
         ground = planet.distance_to_bottom(r, mu, optics.bottom_radius)
         end = dr.minimum(start + depth, dr.maximum(ground, start))
@@ -547,9 +541,9 @@ class AerialPerspectiveVolume:
         """(in-scattered radiance, transmittance) per channel (lists of Float64) from the observer
         to ``distance`` (m) along rays (mu, nu) that hit the ground, interpolated in the volume."""
         n_mu, n_phi, n_d = self.method.aerial_perspective_size
-        sin_product = dr.safe_sqrt(1.0 - mu * mu) * math.sqrt(max(1.0 - self.mu_s ** 2, 0.0))
+        sin_product = dr.safe_sqrt(1.0 - mu * mu) * self.sin_s
         cos_phi = dr.select(sin_product > 1e-9, (nu - mu * self.mu_s) / dr.maximum(sin_product, 1e-9), 1.0)
-        x_mu = view_unit(mu, mi.Float64(self.mu_horizon), mi.Bool(True))
+        x_mu = view_unit(mu, self.mu_horizon, mi.Bool(True))
         x_phi = dr.acos(dr.clip(cos_phi, -1.0, 1.0)) / math.pi
         x_d = dr.sqrt(dr.clip((distance - self._entry(mu)) / self.depth, 0.0, 1.0))
         coords = (texture_coordinate(x_mu, n_mu), texture_coordinate(x_phi, n_phi), texture_coordinate(x_d, n_d))
