@@ -14,6 +14,8 @@ import importlib
 import inspect
 import time
 
+from tqdm import tqdm
+
 from skyref.validation import check_choice, check_view
 from skyref.errors import ParameterError
 
@@ -71,14 +73,33 @@ class SkyMethod:
     #: Wall time of the last :meth:`precompute`, s (None: not precomputed yet).
     precompute_seconds: float | None = None
 
-    def precompute(self) -> float:
+    def precompute(self, progress: bool = False) -> float:
         """Build the method's tables; returns (and stores in :attr:`precompute_seconds`) the
-        wall time, s, including the wait for work queued on the device (:meth:`_finish`)."""
+        wall time, s, including the wait for work queued on the device (:meth:`_finish`). With
+        ``progress``, a bar over the stages of :meth:`precompute_stages`."""
         start = time.perf_counter()
-        self._precompute()
-        self._finish()
+        if not progress:
+            self._precompute()
+            self._finish()
+        else:
+            with tqdm(total=len(self.precompute_stages()), desc=f"{self.name} precompute", unit="stage") as bar:
+                self._stage_done = lambda stage: (bar.set_postfix_str(stage, refresh=False), bar.update(1))
+                try:
+                    self._precompute()
+                    self._finish()
+                finally:
+                    del self._stage_done                 # back to the class's no-op
+                bar.update(bar.total - bar.n)
         self.precompute_seconds = time.perf_counter() - start
         return self.precompute_seconds
+
+    def precompute_stages(self) -> list:
+        """The stages of :meth:`_precompute`, in order, for the progress bar; a method that has
+        several calls :meth:`_stage_done` at the end of each."""
+        return ["tables"]
+
+    #: Called by :meth:`_precompute` with the name of each stage it finishes.
+    _stage_done = staticmethod(lambda stage: None)
 
     def _precompute(self):
         raise NotImplementedError

@@ -104,7 +104,7 @@ def audit(method, scene, max_spp: int = 16384, cache_dir: str | None = None, log
     precompute_s = getattr(method, "precompute_seconds", None)
     if precompute_s is None:  # not precomputed yet (tables given by a user come precomputed)
         log(f"audit {method.name}: precomputing")
-        precompute_s = method.precompute()
+        precompute_s = method.precompute(progress=log is print)
     target = INITIAL_TARGET
     while True:
         log(f"audit {method.name}: ground truth to {100 * target:.2g}% (95th percentile of standard error)")

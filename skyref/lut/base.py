@@ -68,12 +68,27 @@ class LutOptics:
     def scattering(self, altitude, channel):
         """(Rayleigh scattering, Mie scattering) coefficients at ``altitude`` (m) for the lanes'
         wavelength ``channel``, m^-1 (Float64)."""
-        rayleigh = mi.Float64(0.0)
-        for c in self.rayleigh:
-            rayleigh += mi.Float64(c.coefficients(channel)[0]) * c.density(altitude)
-        mie = mi.Float64(0.0)
-        for c in self.mie:
-            mie += mi.Float64(c.coefficients(channel)[0]) * c.density(altitude)
+        return self._scattering(self._densities(altitude), channel)
+
+    def scattering_by_channel(self, altitude, channels: int):
+        """(Rayleigh, Mie) scattering coefficients at ``altitude`` (m) for channels 0 ..
+        ``channels`` - 1: two lists of Float64, m^-1, the densities evaluated once."""
+        densities = self._densities(altitude)
+        pairs = [self._scattering(densities, mi.UInt32(k)) for k in range(channels)]
+        return [rayleigh for rayleigh, _ in pairs], [mie for _, mie in pairs]
+
+    def _densities(self, altitude):
+        """(Rayleigh densities, Mie densities) at ``altitude`` (m), one per constituent."""
+        return [c.density(altitude) for c in self.rayleigh], [c.density(altitude) for c in self.mie]
+
+    def _scattering(self, densities, channel):
+        """(Rayleigh, Mie) scattering coefficients, m^-1, for ``channel`` at the relative
+        ``densities`` of :meth:`_densities`."""
+        rayleigh, mie = mi.Float64(0.0), mi.Float64(0.0)
+        for c, rho in zip(self.rayleigh, densities[0]):
+            rayleigh += mi.Float64(c.coefficients(channel)[0]) * rho
+        for c, rho in zip(self.mie, densities[1]):
+            mie += mi.Float64(c.coefficients(channel)[0]) * rho
         return rayleigh, mie
 
     def extinction(self, altitude, channel):

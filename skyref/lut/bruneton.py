@@ -33,7 +33,14 @@ sun's transmittance at every point); then for each order n = 2 .. K (K = ``scatt
    after n bounces, an integral over the sphere of incident directions (16 x 32 midpoint samples
    in theta, phi) of the order n-1 radiance (a lookup), plus, for directions that hit the ground,
    the ground's Lambertian reflection of the order n-2 ground irradiance, times the local
-   scattering coefficients and phase functions. This is the expensive step;
+   scattering coefficients and phase functions. The paper lays its sample directions out in the
+   view's frame, so every cell looks the incident radiance up anew (16 x 32 x 4D lookups per cell
+   and wavelength: 88% of the precomputation). skyref lays the same midpoint rule out in the
+   sun's frame (turned about the zenith), where the incident radiance at (r, mu_s) depends on
+   neither mu nor nu: it is looked up once per (r, mu_s) and direction, and each cell only sums it
+   with its phase functions, all wavelengths in one lane (8 x 64 x 16 x 8 cells, 4 orders, 17
+   wavelengths: the whole precomputation 169 s -> 30 s; tables within 0.4% of the view-frame
+   rule, 0.06% at the 99th percentile);
 2. the ground irradiance of order n-1 (hemisphere integral of the order n-1 radiance), added to
    the irradiance table;
 3. the order n radiance: J_n integrated along the ray with the transmittance (trapezoidal rule,
@@ -41,7 +48,7 @@ sun's transmittance at every point); then for each order n = 2 .. K (K = ``scatt
    cell's nu.
 
 Every table cell is computed in one Dr.Jit lane per (cell, wavelength channel), in double
-precision; the integrals are flat symbolic loops. Table storage precision (float32 or float16)
+precision (the scattering density: one lane per cell); the integrals are flat symbolic loops. Table storage precision (float32 or float16)
 applies to the 3D scattering tables, as in Bruneton's code; transmittance and irradiance are
 always float32 there and here.
 
@@ -100,7 +107,7 @@ from skyref.lut.table import PRECISIONS, Table, texture_coordinate, unit_range
 from skyref.lut.transmittance import TransmittanceTable
 from skyref.atmosphere.sun import SUN_ANGULAR_RADIUS_DEG
 
-__all__ = ["METRES_PER_KM", "Bruneton2017"]
+__all__ = ["METRES_PER_KM", "MAX_INCIDENT_VALUES", "Bruneton2017"]
 
 
 #: The scattering density is stored per kilometre (W m^-2 sr^-1 nm^-1 km^-1), as in Bruneton's
@@ -111,6 +118,10 @@ METRES_PER_KM = 1000.0
 def _smoothstep(edge0: float, edge1: float, x):
     t = dr.clip((x - edge0) / (edge1 - edge0), 0.0, 1.0)
     return t * t * (3.0 - 2.0 * t)
+
+
+#: Most values the incident radiance field of the scattering-density stage may hold (float64: 1 GB).
+MAX_INCIDENT_VALUES = 1 << 27
 
 
 class Bruneton2017(LutMethod):
@@ -157,6 +168,12 @@ class Bruneton2017(LutMethod):
         self.max_sun_zenith_deg = check_number("max_sun_zenith_deg", max_sun_zenith_deg, 90.0, 180.0,
                                                lo_open=True)
         super().__init__(atmosphere, wavelengths_nm, precision, sun_angular_radius_deg, variant)
+        incident_values = self.r_size * self.mu_s_size * 2 * self.density_samples ** 2 * self.channels
+        if incident_values > MAX_INCIDENT_VALUES:
+            raise ParameterError("density_samples", density_samples,
+                                 f"r_size x mu_s_size x 2 density_samples^2 x wavelengths <= {MAX_INCIDENT_VALUES:,}",
+                                 f"the incident radiance field would hold {incident_values:,} values: fewer density "
+                                 "samples, r or mu_s cells, or wavelengths")
 
         self.bottom_radius = self.optics.bottom_radius
         self.top_radius = self.optics.top_radius
@@ -253,15 +270,17 @@ class Bruneton2017(LutMethod):
 
     # --- table cells as lanes ------------------------------------------------------------------
 
-    def _scattering_cells(self):
+    def _scattering_cells(self, per_channel: bool = True):
         """(r, mu, mu_s, nu, ray_hits_ground, channel) of every (scattering cell, channel) lane,
-        cells in the 3D texture's order [r][mu][nu * mu_s_size + mu_s]. nu sits on grid points
-        i / (nu_size - 1) and is clamped to the range that mu and mu_s allow (nu is not
-        independent of them: the view and the sun are both unit vectors)."""
+        cells in the 3D texture's order [r][mu][nu * mu_s_size + mu_s]; without ``per_channel``,
+        one lane per cell (channel None). nu sits on grid points i / (nu_size - 1) and is clamped
+        to the range that mu and mu_s allow (nu is not independent of them: the view and the sun
+        are both unit vectors)."""
         width = self.nu_size * self.mu_s_size
-        lane = dr.arange(mi.UInt32, self.r_size * self.mu_size * width * self.channels)
-        channel = lane % self.channels
-        cell = lane // self.channels
+        channels = self.channels if per_channel else 1
+        lane = dr.arange(mi.UInt32, self.r_size * self.mu_size * width * channels)
+        channel = lane % channels if per_channel else None
+        cell = lane // channels
         x = cell % width
         i_mu = (cell // width) % self.mu_size
         i_r = cell // (width * self.mu_size)
@@ -320,20 +339,28 @@ class Bruneton2017(LutMethod):
         r_e, mu_s_e, channel_e = self._irradiance_cells()
         ground_irradiance = self._irradiance_table(self._direct_irradiance(r_e, mu_s_e, channel_e).numpy())
         sky_irradiance = np.zeros(self.irradiance_width * self.irradiance_height * self.channels)
+        self._stage_done("transmittance and direct irradiance")
 
         r, mu, mu_s, nu, hits, channel = self._scattering_cells()
+        cell_r, cell_mu, cell_mu_s, cell_nu, _, _ = self._scattering_cells(per_channel=False)
         rayleigh, mie = self._single_scattering(r, mu, mu_s, nu, hits, channel)
         dr.eval(rayleigh, mie)
         single_rayleigh = self._scattering_table(rayleigh)
         single_mie = self._scattering_table(mie)
         scattering = rayleigh.numpy()
         single_mie_values = mie.numpy()
+        self._stage_done("single scattering")
 
         previous_order = self._single_order(single_rayleigh, single_mie)
         rayleigh_phase = optics.rayleigh_phase(nu)
-        for _order in range(2, self.scattering_orders + 1):
-            density = self._scattering_density(r, mu, mu_s, nu, channel, previous_order, ground_irradiance)
-            density = self._scattering_table(density * METRES_PER_KM)
+        for order in range(2, self.scattering_orders + 1):
+            incident = self._incident_radiance(previous_order, ground_irradiance)
+            density = self._scattering_density(cell_r, cell_mu, cell_mu_s, cell_nu, incident)
+            dr.eval(density)                       # one kernel for every channel
+            density = Table(np.stack([x.numpy() for x in density], axis=-1) * METRES_PER_KM,
+                            (self.r_size, self.mu_size, self.nu_size * self.mu_s_size), self.channels,
+                            self.precision)
+            self._stage_done(f"order {order}: scattering density")
             delta = self._indirect_irradiance(r_e, mu_s_e, channel_e, previous_order).numpy()
             sky_irradiance += delta
             ground_irradiance = self._irradiance_table(delta)
@@ -341,6 +368,7 @@ class Bruneton2017(LutMethod):
             previous_order = self._multiple_order(self._scattering_table(radiance))
             # Stored divided by the Rayleigh phase function, multiplied back at lookup.
             scattering += (radiance / rayleigh_phase).numpy()
+            self._stage_done(f"order {order}: irradiance and radiance")
 
         shape = (self.r_size, self.mu_size, self.nu_size * self.mu_s_size)
         if self.combined_mie:
@@ -352,6 +380,11 @@ class Bruneton2017(LutMethod):
             self.scattering = Table(scattering, shape, self.channels, self.precision)
             self.single_mie = Table(single_mie_values, shape, self.channels, self.precision)
         self.irradiance = self._irradiance_table(sky_irradiance)
+
+    def precompute_stages(self) -> list:
+        return (["transmittance and direct irradiance", "single scattering"]
+                + [f"order {n}: {stage}" for n in range(2, self.scattering_orders + 1)
+                   for stage in ("scattering density", "irradiance and radiance")])
 
     def _single_order(self, rayleigh: Table, mie: Table):
         """Order-1 radiance from the single Rayleigh and Mie tables, phase functions applied:
@@ -405,44 +438,81 @@ class Bruneton2017(LutMethod):
         solar = self._solar_irradiance(channel) * dx
         return rayleigh * solar, mie * solar
 
-    @dr.syntax
-    def _scattering_density(self, r, mu, mu_s, nu, channel, previous_order, ground_irradiance):
-        """Radiance scattered at radius r towards -omega (zenith cosine mu) after n bounces,
-        W m^-3 sr^-1 nm^-1 (ComputeScatteringDensity): the sphere integral over incident
-        directions omega_i of [order n-1 radiance from omega_i (``previous_order``) + for omega_i
-        that hit the ground, T(to the ground) albedo / pi E_{n-2}(ground point)
-        (``ground_irradiance``)] x sum over Rayleigh and Mie of sigma_s p(omega . omega_i).
-        Midpoint rule on ``density_samples`` polar x twice as many azimuthal angles, one flat
-        loop. The frame: zenith z, omega in the xz-plane, the sun omega_s from mu_s and nu."""
-        R = self.bottom_radius
+    def _density_directions(self, index):
+        """Direction ``index`` (UInt32 < 2 n^2) of the scattering-density quadrature, n =
+        ``density_samples``: the midpoints of n polar x 2n azimuthal angles in the *sun's* frame
+        (zenith z, the sun in the xz-plane). Returns (wx, wy, wz, solid-angle weight)."""
         n = self.density_samples
         step = math.pi / n
-        omega_x = dr.safe_sqrt(1.0 - mu * mu)
-        sun_x = dr.select(omega_x == 0.0, 0.0, (nu - mu * mu_s) / dr.maximum(omega_x, 1e-30))
-        sun_y = dr.safe_sqrt(1.0 - sun_x * sun_x - mu_s * mu_s)
-        sigma_rayleigh, sigma_mie = self.optics.scattering(r - R, channel)
-        albedo = self.optics.ground_albedo(channel)
-        total = mi.Float64(0.0)
+        theta = (mi.Float64(index // (2 * n)) + 0.5) * step
+        phi = (mi.Float64(index % (2 * n)) + 0.5) * step
+        sin_theta, cos_theta = dr.sincos(theta)
+        sin_phi, cos_phi = dr.sincos(phi)
+        return cos_phi * sin_theta, sin_phi * sin_theta, cos_theta, sin_theta * step * step
+
+    def _incident_radiance(self, previous_order, ground_irradiance) -> mi.Float64:
+        """The order n-1 radiance arriving at every (r, mu_s) of the scattering table from every
+        direction omega_i of the density quadrature, times its solid angle (flat Float64 in the
+        order [r][mu_s][direction][channel]): [order n-1 radiance from omega_i
+        (``previous_order``) + for omega_i that hit the ground, T(to the ground) albedo / pi
+        E_{n-2}(ground point) (``ground_irradiance``)]. In the sun's frame this field depends on
+        neither the view's mu nor nu, so it is looked up once per (r, mu_s), not once per cell."""
+        R = self.bottom_radius
+        directions = 2 * self.density_samples ** 2
+        lane = dr.arange(mi.UInt32, self.r_size * self.mu_s_size * directions * self.channels)
+        channel = lane % self.channels
+        direction = (lane // self.channels) % directions
+        i_mu_s = (lane // (self.channels * directions)) % self.mu_s_size
+        i_r = lane // (self.channels * directions * self.mu_s_size)
+        r, _, mu_s, _, _ = self.scattering_parameters(mi.Float64(0.5), (mi.Float64(i_mu_s) + 0.5) / self.mu_s_size,
+                                                      mi.Float64(0.75), (mi.Float64(i_r) + 0.5) / self.r_size)
+        sin_s = dr.safe_sqrt(1.0 - mu_s * mu_s)
+        wx, _, wz, weight = self._density_directions(direction)
+        hits_ground = planet.intersects_ground(r, wz, R)
+        incident = previous_order(r, wz, mu_s, sin_s * wx + mu_s * wz, hits_ground, channel)
+        # Light whose last bounce was the ground: the ground point at distance d has the normal
+        # (omega_i d + r z) / R, and the sun's cosine there is its dot with omega_s.
+        d = planet.distance_to_bottom(r, wz, R)
+        mu_s_ground = (sin_s * wx * d + mu_s * (r + wz * d)) / R
+        reflected = (self.transmittance.between(r, wz, d, hits_ground, channel) * self.optics.ground_albedo(channel)
+                     / math.pi * self._irradiance_lookup(ground_irradiance, mi.Float64(R), mu_s_ground, channel))
+        incident += dr.select(hits_ground, reflected, 0.0)
+        result = incident * weight
+        dr.eval(result)
+        return result
+
+    @dr.syntax
+    def _scattering_density(self, r, mu, mu_s, nu, incident):
+        """Radiance scattered at radius r towards -omega (zenith cosine mu) after n bounces,
+        W m^-3 sr^-1 nm^-1 (ComputeScatteringDensity): the sphere integral over incident
+        directions omega_i of the ``incident`` radiance (:meth:`_incident_radiance`) x sum over
+        Rayleigh and Mie of sigma_s p(omega . omega_i), by the midpoint rule of
+        :meth:`_density_directions` in the sun's frame (the paper integrates in the view's frame;
+        the same rule turned about the zenith). One lane per scattering cell, its channels in a
+        list: the geometry and the phase functions are paid once for all wavelengths."""
+        R = self.bottom_radius
+        directions = 2 * self.density_samples ** 2
+        channels = range(self.channels)
+        # omega in the sun's frame: omega . z = mu, omega . sun = nu, sun = (sin_s, 0, mu_s)
+        sin_s = dr.safe_sqrt(1.0 - mu_s * mu_s)
+        omega_x = dr.select(sin_s == 0.0, dr.safe_sqrt(1.0 - mu * mu), (nu - mu * mu_s) / dr.maximum(sin_s, 1e-30))
+        omega_y = dr.safe_sqrt(1.0 - mu * mu - omega_x * omega_x)
+        sigma_rayleigh, sigma_mie = self.optics.scattering_by_channel(r - R, self.channels)
+        # the (r, mu_s) row of the incident field this cell reads
+        cell = dr.arange(mi.UInt32, dr.width(mu))
+        width = self.nu_size * self.mu_s_size
+        row = (cell // (width * self.mu_size)) * self.mu_s_size + cell % self.mu_s_size
+        start = row * (directions * self.channels)
+        total = [mi.Float64(0.0) for _ in channels]
         i = mi.UInt32(0)
-        while i < 2 * n * n:
-            theta = (mi.Float64(i // (2 * n)) + 0.5) * step
-            phi = (mi.Float64(i % (2 * n)) + 0.5) * step
-            sin_theta, cos_theta = dr.sincos(theta)
-            sin_phi, cos_phi = dr.sincos(phi)
-            wx, wy, wz = cos_phi * sin_theta, sin_phi * sin_theta, cos_theta
-            hits_ground = planet.intersects_ground(r, wz, R)
-            incident = previous_order(r, wz, mu_s, sun_x * wx + sun_y * wy + mu_s * wz, hits_ground, channel)
-            # Light whose last bounce was the ground: the ground point at distance d has the
-            # normal (omega_i d + r z) / R, and the sun's cosine there is its dot with omega_s.
-            d = planet.distance_to_bottom(r, wz, R)
-            mu_s_ground = (sun_x * wx * d + sun_y * wy * d + mu_s * (r + wz * d)) / R
-            reflected = (self.transmittance.between(r, wz, d, hits_ground, channel) * albedo / math.pi
-                         * self._irradiance_lookup(ground_irradiance, mi.Float64(R), mu_s_ground, channel))
-            incident += dr.select(hits_ground, reflected, 0.0)
-            cos_scatter = omega_x * wx + mu * wz
-            phase = sigma_rayleigh * self.optics.rayleigh_phase(cos_scatter) + sigma_mie * self.optics.mie_phase(
-                cos_scatter)
-            total += incident * phase * (sin_theta * step * step)
+        while i < directions:
+            wx, wy, wz, _ = self._density_directions(i)
+            cos_scatter = omega_x * wx + omega_y * wy + mu * wz
+            phase_rayleigh = self.optics.rayleigh_phase(cos_scatter)
+            phase_mie = self.optics.mie_phase(cos_scatter)
+            offset = start + i * self.channels
+            total = [total[k] + dr.gather(mi.Float64, incident, offset + k)
+                     * (sigma_rayleigh[k] * phase_rayleigh + sigma_mie[k] * phase_mie) for k in channels]
             i += 1
         return total
 
