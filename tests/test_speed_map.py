@@ -15,7 +15,7 @@ import math
 import numpy as np
 import pytest
 
-from skyref.audit.advise import advice_lines, parse_tolerance, rank, scene_kind
+from skyref.audit.advise import COSTS_MEAN, advice_lines, parse_tolerance, rank, scene_kind
 from skyref.audit.speed_map import Entry, MapSky, cache_path, entry_summary, evaluate_map, frame_seconds
 from skyref.errors import ParameterError
 from skyref.scene import Observer, Sun, load_scene
@@ -110,6 +110,17 @@ def test_advice_names_method_cost_and_kind():
     assert "clear" in lines[0] and "cheapest method meeting it: b (exact)" in text and "1.00%" in text
     lines = advice_lines(entry_summary(ROWS), scene(sun=Sun(zenith_deg=40.0)), 0.001)
     assert any("no measured method meets 0.1%" in line for line in lines)
+    assert any(line.startswith("most accurate of them: c (partial)") for line in lines)
+
+
+def test_advice_says_nothing_above_the_tolerance_once_a_method_meets_it():
+    """With a method meeting the tolerance, no 'most accurate' line follows it (a partial method
+    below the tolerance read as more accurate than the advice); the costs are explained."""
+    for tolerance in (0.02, 0.06):
+        lines = advice_lines(entry_summary(ROWS), scene(sun=Sun(zenith_deg=40.0)), tolerance)
+        assert lines[2].startswith("cheapest method meeting it")
+        assert not any("most accurate" in line for line in lines), lines
+        assert lines[-1] == COSTS_MEAN
 
 
 def test_advise_cli(tmp_path, capsys):

@@ -17,7 +17,7 @@ from skyref.atmosphere import turbidity
 from skyref.audit.speed_map import FRAME_DIRECTIONS, KINDS, frame_seconds
 from skyref.errors import ParameterError
 
-__all__ = ["ENTRY_KEYS", "MAX_ALTITUDE_M", "MAX_SUN_ZENITH_DEG", "advice_lines", "load_map", "parse_tolerance", "rank",
+__all__ = ["COSTS_MEAN", "ENTRY_KEYS", "MAX_ALTITUDE_M", "MAX_SUN_ZENITH_DEG", "advice_lines", "load_map", "parse_tolerance", "rank",
            "scene_kind"]
 
 #: Highest observer the map's skies represent, m (its high-altitude skies are at 10 km).
@@ -107,6 +107,12 @@ def load_map(path: str) -> list[dict]:
     return entries
 
 
+#: What the costs in the advice are (printed with it).
+COSTS_MEAN = ("costs: CPU seconds of skyref's own implementations on the machine that measured the map "
+              "('skyref report'): a method's precomputation once, its per-view tables once per frame, its "
+              "lookups per direction; an engine on a GPU pays other costs, in the same proportions only roughly")
+
+
 def _cost_text(c: dict, directions: int, frames: int) -> str:
     return (f"{c['cost_s']:.3g} s for {frames} frame(s) of {directions:,} directions (precompute "
             f"{c['precompute_s']:.3g} s, per view {1e3 * c['per_view_s']:.3g} ms, "
@@ -128,8 +134,11 @@ def advice_lines(summaries, scene, tolerance: float, directions: int = FRAME_DIR
             lines.append(f"  next: {c['method']} ({c['label']}): {100 * c['error']:.2f}%, {c['cost_s']:.3g} s")
     else:
         lines.append(f"no measured method meets {100 * tolerance:g}% on {kind} skies")
-    if others:
-        best = others[0]
-        lines.append(f"most accurate above the tolerance: {best['method']} ({best['label']}) "
-                     f"{100 * best['error']:.2f}%, {best['cost_s']:.3g} s")
+        if others:
+            best = others[0]
+            why = ("refused some of these skies" if best["error"] <= tolerance
+                   else f"{100 * best['error']:.2f}%")
+            lines.append(f"most accurate of them: {best['method']} ({best['label']}), {why}; "
+                         f"cost {_cost_text(best, directions, frames)}")
+    lines.append(COSTS_MEAN)
     return lines
