@@ -17,8 +17,8 @@ from skyref.atmosphere import turbidity
 from skyref.audit.speed_map import FRAME_DIRECTIONS, KINDS, frame_seconds
 from skyref.errors import ParameterError
 
-__all__ = ["COSTS_MEAN", "ENTRY_KEYS", "MAX_ALTITUDE_M", "MAX_SUN_ZENITH_DEG", "advice_lines", "load_map", "parse_tolerance", "rank",
-           "scene_kind"]
+__all__ = ["COSTS_MEAN", "ENTRY_KEYS", "MAX_ALTITUDE_M", "MAX_SUN_ZENITH_DEG", "advice_lines", "load_map",
+           "parse_tolerance", "rank", "scene_kind"]
 
 #: Highest observer the map's skies represent, m (its high-altitude skies are at 10 km).
 MAX_ALTITUDE_M = 20_000.0

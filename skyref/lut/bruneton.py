@@ -48,9 +48,9 @@ sun's transmittance at every point); then for each order n = 2 .. K (K = ``scatt
    cell's nu.
 
 Every table cell is computed in one Dr.Jit lane per (cell, wavelength channel), in double
-precision (the scattering density: one lane per cell); the integrals are flat symbolic loops. Table storage precision (float32 or float16)
-applies to the 3D scattering tables, as in Bruneton's code; transmittance and irradiance are
-always float32 there and here.
+precision (the scattering density: one lane per cell); the integrals are flat symbolic loops.
+Table storage precision (float32 or float16) applies to the 3D scattering tables, as in
+Bruneton's code; transmittance and irradiance are always float32 there and here.
 
 Parametrizations (Bruneton 2017 section "Single scattering precomputation"): with
 H = sqrt(R_t^2 - R^2) and rho = sqrt(r^2 - R^2),
