@@ -28,6 +28,7 @@ from skyref.audit.regions import REGIONS, region_masks
 from skyref.color import default_exposure, spectral_to_linear_srgb, tonemap_srgb8
 from skyref.errors import ParameterError
 from skyref.io.atomic import atomic_path, atomic_write
+from skyref.sky_method import SkyMethod
 
 __all__ = ["FINEST_TARGET", "INITIAL_TARGET", "AuditResult", "all_resolved", "audit", "compare", "summary_table",
            "write_report"]
@@ -104,7 +105,9 @@ def audit(method, scene, max_spp: int = 16384, cache_dir: str | None = None, log
     precompute_s = getattr(method, "precompute_seconds", None)
     if precompute_s is None:  # not precomputed yet (tables given by a user come precomputed)
         log(f"audit {method.name}: precomputing")
-        precompute_s = method.precompute(progress=log is print)
+        # skyref's own methods show a bar per stage; any object with precompute() is audited too
+        precompute_s = (method.precompute(progress=log is print) if isinstance(method, SkyMethod)
+                        else method.precompute())
     target = INITIAL_TARGET
     while True:
         log(f"audit {method.name}: ground truth to {100 * target:.2g}% (95th percentile of standard error)")
