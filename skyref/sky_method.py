@@ -10,6 +10,7 @@ in the observer's east-north-up frame, without the solar disk.
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import inspect
 import time
@@ -78,18 +79,9 @@ class SkyMethod:
         wall time, s, including the wait for work queued on the device (:meth:`_finish`). With
         ``progress``, a bar over the stages of :meth:`precompute_stages`."""
         start = time.perf_counter()
-        if not progress:
+        with self._stage_bar(progress):
             self._precompute()
             self._finish()
-        else:
-            with tqdm(total=len(self.precompute_stages()), desc=f"{self.name} precompute", unit="stage") as bar:
-                self._stage_done = lambda stage: (bar.set_postfix_str(stage, refresh=False), bar.update(1))
-                try:
-                    self._precompute()
-                    self._finish()
-                finally:
-                    del self._stage_done                 # back to the class's no-op
-                bar.update(bar.total - bar.n)
         self.precompute_seconds = time.perf_counter() - start
         return self.precompute_seconds
 
@@ -100,6 +92,20 @@ class SkyMethod:
 
     #: Called by :meth:`_precompute` with the name of each stage it finishes.
     _stage_done = staticmethod(lambda stage: None)
+
+    @contextlib.contextmanager
+    def _stage_bar(self, progress: bool):
+        """While open, with ``progress``: :meth:`_stage_done` advances a bar over the stages."""
+        if not progress:
+            yield
+            return
+        with tqdm(total=len(self.precompute_stages()), desc=f"{self.name} precompute", unit="stage") as bar:
+            self._stage_done = lambda stage: (bar.set_postfix_str(stage, refresh=False), bar.update(1))
+            try:
+                yield
+            finally:
+                del self._stage_done                     # back to the class's no-op
+            bar.update(bar.total - bar.n)
 
     def _precompute(self):
         raise NotImplementedError
