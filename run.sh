@@ -37,7 +37,7 @@ setup() {
         echo "run.sh: creating $VENV and installing skyref with its test dependencies" >&2
         python3 -m venv "$VENV"
         "$VENV/bin/python" -m pip install -q --upgrade pip
-        "$VENV/bin/python" -m pip install -q -e '.[test]'
+        "$VENV/bin/python" -m pip install -q -e '.[test,fit,batch]'
         echo "$want" > "$STAMP"
     fi
 }
@@ -46,7 +46,7 @@ case "${1:-}" in
     setup) setup ;;
     demo)
         setup
-        "$VENV/bin/skyref" render scenes/earth-clear.toml -o out/earth-clear.exr --png out/earth-clear.png
+        "$VENV/bin/skyref" render scenes/earth-clear.toml -o out/earth-clear.exr --png out/earth-clear.png --annotate
         ;;
     test)
         setup

@@ -27,19 +27,23 @@ from skyref.atmosphere import PRESETS
 from skyref.audit.advise import advice_lines, load_map, parse_tolerance
 from skyref.audit.speed_map import ENTRIES, TRUTH_GRID, entry_summary, evaluate_map, fitted_entries, truth_skies
 from skyref.batch import load_grid, run_batch
+from skyref.envmap import (DEFAULT_WIDTH, ORIENTATIONS, SUN_MODES, check_width, render_environment_map, snippet_path,
+                           write_environment_map)
 from skyref.errors import ParameterError, SkyrefSetupError
 from skyref.fit.cli import add_fit_parser
 from skyref.invert.cli import add_invert_parser
-from skyref.io.exr import write_sky_exr
-from skyref.io.png import write_png
+from skyref.io.annotate import check_annotatable
+from skyref.io.exr import LAYERS, check_layers, write_sky_exr
+from skyref.io.png import exposure_from_ev100, write_png
 from skyref.lut import METHODS, lut_method, method_class
 from skyref.lut import REGISTRY as LUT_REGISTRY
 from skyref.render import render_sky
 from skyref.scene import load_scene
-from skyref.validation import check_int, check_output_directory, check_output_file, safe_file_name
+from skyref.timelapse import frame_times, parse_place, render_timelapse, sun_from_options, timelapse_scene
+from skyref.validation import check_choice, check_int, check_output_directory, check_output_file, safe_file_name
 
-__all__ = ["build_parser", "cmd_advise", "cmd_audit", "cmd_batch", "cmd_info", "cmd_render", "cmd_report",
-           "cmd_validate", "main"]
+__all__ = ["build_parser", "cmd_advise", "cmd_audit", "cmd_batch", "cmd_envmap", "cmd_export_lut", "cmd_info",
+           "cmd_render", "cmd_report", "cmd_timelapse", "cmd_validate", "main"]
 
 
 def _describe_scene(scene) -> str:
@@ -98,15 +102,26 @@ def cmd_info(args) -> int:
 
 
 def cmd_render(args) -> int:
+    layers = check_layers(args.layers, "--layers")
     check_output_file(args.output, ".exr", "--output")
     if args.png:
         check_output_file(args.png, ".png", "--png")
+    elif args.annotate or args.exposure is not None:
+        name, value = ("--annotate", True) if args.annotate else ("--exposure", args.exposure)
+        raise ParameterError(name, value, "with --png (it shapes the PNG preview)", "no --png to apply it to")
+    exposure = None if args.exposure is None else exposure_from_ev100(args.exposure, "--exposure")
     scene = load_scene(args.scene, report=print)
+    scene = scene.replace(sun=sun_from_options(scene.sun, args.time, args.place))
+    if args.annotate:
+        check_annotatable(scene.camera, "--annotate")
+    if args.time or args.place:
+        print(f"sun at zenith {scene.sun.zenith_deg:.2f} deg, azimuth {scene.sun.azimuth_deg:.2f} deg "
+              f"({scene.sun.time.isoformat()} at {scene.sun.latitude_deg:g} N, {scene.sun.longitude_deg:g} E)")
     sky = render_sky(scene, spp=args.spp, passes=args.passes, seed=args.seed, variant=args.variant,
                      geometry=args.geometry, progress=not args.quiet)
-    write_sky_exr(sky, args.output)
+    write_sky_exr(sky, args.output, layers=layers, half=args.half, report=print)
     if args.png:
-        write_png(sky, args.png)
+        write_png(sky, args.png, exposure=exposure, annotate=args.annotate)
     meta = sky.metadata
     visible = sky.radiance > 0
     noise = (f"median relative standard error "
@@ -114,6 +129,20 @@ def cmd_render(args) -> int:
              if visible.any() else "the sky is black (nothing scatters or reflects light towards the camera)")
     print(f"{args.output}: {sky.shape[1]}x{sky.shape[0]} px, {sky.shape[2]} wavelengths, {meta['spp']} spp "
           f"in {meta['render_time_s']:.1f} s ({meta['samples_per_second'] / 1e6:.2f} M samples/s), {noise}")
+    return 0
+
+
+def cmd_timelapse(args) -> int:
+    latitude, longitude = parse_place(args.place)
+    times = frame_times(args.date, args.start, args.end, args.step, latitude, longitude, args.tz)
+    exposure = None if args.exposure is None else exposure_from_ev100(args.exposure, "--exposure")
+    scene = timelapse_scene(load_scene(args.scene), args.size, args.wavelengths)
+    summary = render_timelapse(scene, times, latitude, longitude, args.output, spp=args.spp, exposure=exposure,
+                               annotate=args.annotate, exr=args.exr, webp=args.webp, fps=args.fps,
+                               variant=args.variant, progress=not args.quiet)
+    print(f"{args.output}: {len(times)} frames, {times[0]:%Y-%m-%d %H:%M} to {times[-1]:%H:%M %Z} every {args.step} "
+          f"({scene.camera.width}x{scene.camera.height} px, {args.spp} spp, {summary['render_time_s']:.1f} s), "
+          f"exposure EV100 {summary['ev100']:.2f}; " + ", ".join(map(os.path.basename, summary["animations"])))
     return 0
 
 
@@ -125,9 +154,10 @@ def cmd_batch(args) -> int:
               f"output {grid.output.directory}")
         return 0
     manifest = run_batch(grid, scheduler=args.scheduler, workers=args.workers, variant=args.variant,
-                         verify=args.verify, progress=not args.quiet)
+                         verify=args.verify, progress=not args.quiet, netcdf=args.netcdf)
     print(f"{grid.output.directory}: {manifest['skies_finished']}/{manifest['skies_total']} skies finished, "
-          f"{len(manifest['failed'])} failed, this run {manifest['wall_time_s']:.1f} s")
+          f"{len(manifest['failed'])} failed, this run {manifest['wall_time_s']:.1f} s"
+          + (f"; netCDF copy {manifest['netcdf']}" if manifest["netcdf"] else ""))
     return 1 if manifest["failed"] else 0
 
 
@@ -187,6 +217,24 @@ def cmd_audit(args) -> int:
     return 0
 
 
+def cmd_export_lut(args) -> int:
+    from skyref.lut import export  # lazy: Dr.Jit and OpenEXR, see the module docstring
+
+    export.check_method(args.method)
+    check_output_directory(args.out, "-o")
+    options = dict(_option_value(o) for o in args.option or [])
+    scene = load_scene(args.scene)
+    method = export.build_method(args.method, scene, args.wavelengths, args.precision, options)
+    method.precompute(progress=not args.quiet)
+    record = export.export_lut(method, args.out, sun_direction=scene.sun.direction,
+                               observer_altitude_m=scene.observer.altitude_m, source={"scene": args.scene})
+    tables = ", ".join(f"{name} {t['width']}x{t['height']}" + (f"x{t['depth']}" if "depth" in t else "")
+                       for name, t in record["tables"].items())
+    print(f"{args.out}: {args.method} {tables} ({args.precision}; precompute {method.precompute_seconds:.1f} s), "
+          f"{args.method}.json, {args.method}.glsl")
+    return 0
+
+
 def cmd_report(args) -> int:
     from skyref.audit.map_report import write_map_report  # lazy: see the module docstring
 
@@ -215,6 +263,22 @@ def cmd_advise(args) -> int:
     return 0
 
 
+def cmd_envmap(args) -> int:
+    check_choice("--orientation", args.orientation, ORIENTATIONS)
+    check_choice("--sun", args.sun, SUN_MODES)
+    width = check_width(args.width, "--width")
+    check_output_file(args.output, ".exr", "--output")
+    check_output_file(snippet_path(args.output, args.orientation), "", "--output")
+    scene = load_scene(args.scene, report=print)
+    envmap = render_environment_map(scene, width, args.orientation, args.sun, spp=args.spp, passes=args.passes,
+                                    seed=args.seed, variant=args.variant, progress=not args.quiet)
+    exr, snippet = write_environment_map(envmap, args.output)
+    sun = ", ".join(f"{c:.4g}" for c in envmap.sun_irradiance)
+    print(f"{exr}: {envmap.rgb.shape[1]}x{envmap.rgb.shape[0]} linear sRGB (cd m^-2) for {args.orientation}, "
+          f"sun {args.sun} (irradiance RGB {sun} lux); {snippet}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="skyref", description="Reference skies: a spectral path tracer "
                                      "for planetary atmospheres and the tools that use it as ground truth.")
@@ -228,6 +292,10 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("render", help="render a scene to a spectral EXR (and a PNG preview)")
     p.add_argument("scene", metavar="SCENE", help="scene TOML file")
     p.add_argument("-o", "--output", required=True, help="spectral EXR to write")
+    p.add_argument("--layers", default=",".join(LAYERS), help="what the EXR holds, a comma-separated subset of "
+                   f"{', '.join(LAYERS)} (default: all, a complete reference; rgb alone: an environment map)")
+    p.add_argument("--half", action="store_true", help="store the EXR's channels as 16-bit half floats "
+                   "(about half the size; values above 65504, e.g. the sun's disk in rgb, are clamped)")
     p.add_argument("--png", help="also write a tone-mapped sRGB PNG preview")
     p.add_argument("--spp", type=int, help="samples per pixel (default: the scene's)")
     p.add_argument("--passes", type=int, help="independent passes for the standard error (default: the scene's)")
@@ -235,8 +303,46 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--variant", help="Mitsuba variant (default: cuda_ad_rgb with a GPU, else llvm_ad_rgb)")
     p.add_argument("--geometry", default="spherical", choices=("spherical", "plane_parallel"),
                    help="planet geometry (plane_parallel is for comparisons with DISORT)")
+    p.add_argument("--annotate", action="store_true", help="draw the horizon, N/E/S/W and a ring around the sun "
+                   "on the PNG preview (fisheye and equirectangular cameras)")
+    p.add_argument("--exposure", type=float, metavar="EV", help="absolute exposure of the PNG preview, EV at ISO 100 "
+                   "(a clear day's sky: about 13): luminance 1.2*2^EV cd/m^2 maps to 1 before the tone curve x/(1+x), "
+                   "so equal luminances give equal pixels in every image (default: per image, the 99th percentile "
+                   "of luminance becomes 0.8)")
+    p.add_argument("--time", help="put the sun where it stands at this time: ISO 8601 with a UTC offset, e.g. "
+                   "2026-06-21T06:00+02:00 (with --place, or the scene's sun.latitude_deg/longitude_deg)")
+    p.add_argument("--place", metavar="LAT,LON", help="the observer's place for --time, degrees north and east, "
+                   "e.g. 48.85,2.35")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.set_defaults(run=cmd_render)
+
+    p = sub.add_parser("timelapse", help="a day of skies: PNG frames (optionally EXR) and an animated GIF, one "
+                       "exposure for all")
+    p.add_argument("scene", metavar="SCENE", help="scene TOML file (its camera is resized to --size)")
+    p.add_argument("--place", required=True, metavar="LAT,LON", help="degrees north and east, e.g. 48.85,2.35")
+    p.add_argument("--date", help="local date YYYY-MM-DD (needed by sunrise/sunset/noon and HH:MM bounds)")
+    p.add_argument("--from", dest="start", default="sunrise-1h", help="first frame: sunrise, sunset or noon with an "
+                   "optional +-DURATION, a local time HH:MM, or an ISO time with offset (default %(default)s)")
+    p.add_argument("--to", dest="end", default="sunset+1h", help="last frame, as --from (default %(default)s)")
+    p.add_argument("--step", default="30min", help="time between frames: a number and h, min or s (default "
+                   "%(default)s)")
+    p.add_argument("--tz", help="local time zone of the bounds and stamps: UTC, +HH:MM or an IANA name such as "
+                   "Europe/Paris (default: an ISO --from's offset, else UTC + round(longitude / 15) h)")
+    p.add_argument("-o", "--output", required=True, metavar="DIR", help="directory for frame-NNN.png, timelapse.gif")
+    p.add_argument("--size", type=int, default=128, help="longer image side, pixels (default %(default)s)")
+    p.add_argument("--spp", type=int, default=64, help="samples per pixel (default %(default)s)")
+    p.add_argument("--wavelengths", default="rgb", help="rgb (680, 550, 440 nm; the default) or scene (the "
+                   "scene's own)")
+    p.add_argument("--exposure", type=float, metavar="EV", help="exposure of every frame, EV at ISO 100 (as for "
+                   "render; default: the per-image exposure of the brightest frame)")
+    p.add_argument("--annotate", action=argparse.BooleanOptionalAction, default=True,
+                   help="horizon, N/E/S/W and the sun on each frame (default: on)")
+    p.add_argument("--exr", action="store_true", help="also write each frame's spectral EXR")
+    p.add_argument("--webp", action="store_true", help="also write an animated WebP")
+    p.add_argument("--fps", type=float, default=6.0, help="frames per second of the animation (default %(default)s)")
+    p.add_argument("--variant", help="Mitsuba variant (default: cuda_ad_rgb with a GPU, else llvm_ad_rgb)")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(run=cmd_timelapse)
 
     p = sub.add_parser("batch", help="render a grid of skies (resumable; local dask cluster or --scheduler)")
     p.add_argument("grid", metavar="GRID", help="grid TOML file (base scene, axes, output)")
@@ -244,6 +350,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", type=int, help="local worker processes (default: one per two cores)")
     p.add_argument("--variant", help="Mitsuba variant (default: cuda_ad_rgb with a GPU, else llvm_ad_rgb)")
     p.add_argument("--verify", action="store_true", help="check finished skies' SHA-256 before skipping them")
+    p.add_argument("--netcdf", action="store_true", help="also write dataset.nc (netCDF-3, CF) once every sky "
+                   "is finished")
     p.add_argument("--dry-run", action="store_true", help="check the grid and print its size; render nothing")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.set_defaults(run=cmd_batch)
@@ -277,6 +385,40 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--directions", type=int, default=1920 * 1080, help="directions per frame (default 1920x1080)")
     p.add_argument("--frames", type=int, default=1, help="frames with the same atmosphere (precompute paid once)")
     p.set_defaults(run=cmd_advise)
+
+    p = sub.add_parser("envmap", help="a scene's sky as a renderer's environment map: an RGB lat-long EXR, the sun "
+                       "as a light (Mitsuba XML or Blender script beside it) or in the map")
+    p.add_argument("scene", metavar="SCENE", help="scene TOML file (its camera is replaced by the map's)")
+    p.add_argument("-o", "--output", required=True, help="RGB EXR to write; sky.exr gets sky.mitsuba.xml or "
+                   "sky.blender.py beside it")
+    p.add_argument("--orientation", default="mitsuba", help="mitsuba (envmap, y up, north -z) or blender "
+                   "(Environment Texture, z up, north +y); default mitsuba")
+    p.add_argument("--sun", default="separate", help="separate (a directional / Sun light with the transmitted "
+                   "irradiance) or in-map (the sun's texels carry it); default separate")
+    p.add_argument("--width", type=int, default=DEFAULT_WIDTH, help=f"map columns, a multiple of 4 (default "
+                   f"{DEFAULT_WIDTH}; the sky is rendered at width x width/2)")
+    p.add_argument("--spp", type=int, help="samples per pixel (default: the scene's)")
+    p.add_argument("--passes", type=int, help="independent passes (default: the scene's)")
+    p.add_argument("--seed", type=int, help="random seed (default: the scene's)")
+    p.add_argument("--variant", help="Mitsuba variant (default: cuda_ad_rgb with a GPU, else llvm_ad_rgb)")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(run=cmd_envmap)
+
+    p = sub.add_parser("export-lut", help="write a LUT method's tables for an engine: EXR textures in the "
+                       "paper's layout, a JSON of the constants and a GLSL snippet")
+    p.add_argument("--method", required=True, help="bruneton2017 or hillaire2020")
+    p.add_argument("-o", "--out", required=True, help="directory to write the tables into")
+    p.add_argument("--scene", default=os.path.join("scenes", "earth-clear.toml"),
+                   help="scene TOML file: the atmosphere, and for hillaire2020's sky view the sun and observer "
+                   "(default scenes/earth-clear.toml)")
+    p.add_argument("--option", action="append", metavar="NAME=VALUE",
+                   help="a method option, e.g. scattering_orders=8 or mu_size=256 (repeatable)")
+    p.add_argument("--precision", default="float32", help="table storage, float32 or float16 (EXR FLOAT or HALF "
+                   "pixels where the method stores the table so; default float32)")
+    p.add_argument("--wavelengths", default="rgb", help="the three wavelengths of channels R, G, B: rgb "
+                   "(680,550,440 nm, the default) or three numbers in nm, e.g. 700,546,436")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(run=cmd_export_lut)
 
     add_fit_parser(sub)
     add_invert_parser(sub)

@@ -9,6 +9,7 @@ batches are traced together, in launches whose size the integrator bounds
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 
@@ -22,14 +23,19 @@ from skyref.plugins import load_mitsuba
 from skyref.projection import camera_to_world, pixel_directions
 from skyref.scene import RenderSettings
 from skyref.sky import ORDER_NAMES, Sky
-from skyref.validation import check_choice
+from skyref.validation import check_choice, check_number
 
 __all__ = ["MAX_IMAGE_VALUES", "GEOMETRIES", "sensor_dict", "build_integrator", "check_image_size", "render_sky",
-           "relative_error_percentile", "combine_skies", "render_to_error"]
+           "rendered_pixels", "relative_error_percentile", "pixel_relative_error", "PixelPool",
+           "render_to_error", "ROUND_MARGIN"]
 
 #: Most values (passes x pixels x scattering orders x wavelengths) one render accumulates: each
 #: takes ~12 bytes across the device buffer and its host copies, so this is ~13 GB.
 MAX_IMAGE_VALUES = 1 << 30
+
+#: :func:`render_to_error` gives a pixel this margin over the samples the 1/sqrt(spp) law says it
+#: needs, so that most pixels reach the target in the next round.
+ROUND_MARGIN = 1.1
 
 GEOMETRIES = ("spherical", "plane_parallel")
 
@@ -80,6 +86,77 @@ def check_image_size(scene, passes: int) -> None:
                              "covering parts of the view), or with fewer passes or wavelengths")
 
 
+def _settings(scene, spp, passes, seed) -> RenderSettings:
+    """The scene's render settings with ``spp``, ``passes`` and ``seed`` overridden."""
+    render = scene.render
+    return dataclasses.replace(render, spp=render.spp if spp is None else spp,
+                               passes=render.passes if passes is None else passes,
+                               seed=render.seed if seed is None else seed)
+
+
+def rendered_pixels(scene) -> np.ndarray:
+    """Flat indices (row * width + column) of the pixels the scene's ``render.region`` asks
+    for: every pixel, or (``"above_horizon"``) those whose centre direction is at or above the
+    observer's horizon (view zenith <= 90 deg)."""
+    camera = scene.camera
+    if scene.render.region == "all":
+        return np.arange(camera.width * camera.height)
+    return np.flatnonzero(pixel_directions(camera)[..., 2].reshape(-1) >= 0.0)
+
+
+class _PixelRenderer:
+    """The integrator and sensor of one scene, to trace any set of its pixels in passes."""
+
+    def __init__(self, scene, variant, geometry, wavelengths_per_path, estimator):
+        check_choice("geometry", geometry, GEOMETRIES)
+        scene.check_files()
+        check_image_size(scene, scene.render.passes)
+        self.mi = load_mitsuba(variant)
+        self.scene, self.geometry = scene, geometry
+        self.integrator = build_integrator(scene, geometry, wavelengths_per_path, estimator)
+        self.sensor = self.mi.load_dict(sensor_dict(scene.camera))
+        if scene.objects:
+            try:
+                self.integrator.objects = self.mi.load_dict(
+                    {"type": "scene", **{f"object_{i}": item.mitsuba_dict() for i, item in enumerate(scene.objects)}})
+            except RuntimeError as exc:    # an unreadable mesh: Mitsuba's message, first line
+                raise ParameterError("objects", [item.filename or item.type for item in scene.objects],
+                                     "shapes Mitsuba can load", str(exc).strip().splitlines()[0][:200]) from None
+
+    def passes(self, pixels, spp_per_pass: int, passes: int, seed: int, progress=None) -> np.ndarray:
+        """(passes, M, orders, N) radiance of the ``pixels`` from independent passes of
+        ``spp_per_pass`` samples each."""
+        per_pass = self.integrator.render_orders(
+            self.sensor, seed=seed % (1 << 32), spp=spp_per_pass, batches=passes, progress=progress,
+            pixel_centres=self.scene.render.pixel_sampling == "centre", pixels=pixels).numpy()
+        return per_pass.reshape(passes, len(pixels), len(ORDER_NAMES), -1)
+
+    def metadata(self, spp: int, passes: int, seed, elapsed: float, samples: int) -> dict:
+        return {"skyref_version": __version__, "integrator": "atmosphere", "variant": self.mi.variant(),
+                "geometry": self.geometry, "estimator": self.integrator.estimator, "spp": spp, "passes": passes,
+                "seed": seed, "wavelengths_per_path": self.integrator.channels, "region": self.scene.render.region,
+                "render_time_s": elapsed, "samples_per_second": samples / elapsed}
+
+
+def _sky(scene, pixels, radiance, standard_error, orders, metadata) -> Sky:
+    """A :class:`Sky` from per-pixel values of the rendered ``pixels`` (M, N) and (M, orders,
+    N); pixels that were not rendered are NaN."""
+    camera = scene.camera
+    count, n = camera.width * camera.height, len(scene.wavelengths_nm)
+
+    def image(values, shape):
+        full = np.full((count, *shape), np.nan, dtype=np.float32)
+        full[pixels] = values
+        return full.reshape(camera.height, camera.width, *shape)
+
+    by_order = image(orders, (len(ORDER_NAMES), n))
+    return Sky(radiance=image(radiance, (n,)), standard_error=image(standard_error, (n,)),
+               wavelengths_nm=np.asarray(scene.wavelengths_nm, dtype=np.float64),
+               directions=pixel_directions(camera),
+               orders={name: np.ascontiguousarray(by_order[..., i, :]) for i, name in enumerate(ORDER_NAMES)},
+               scene=scene, metadata=metadata)
+
+
 def render_sky(scene, spp: int | None = None, passes: int | None = None, seed: int | None = None,
                variant: str | None = None, geometry: str = "spherical", wavelengths_per_path: int = 0,
                progress: bool = False, estimator: str | None = None) -> Sky:
@@ -87,60 +164,34 @@ def render_sky(scene, spp: int | None = None, passes: int | None = None, seed: i
 
     Returns a :class:`~skyref.sky.Sky`: radiance (H, W, N) in W m^-2 sr^-1 nm^-1 at the scene's
     wavelengths, its standard error, one layer per scattering order, pixel directions, and
-    metadata (samples, time, throughput, variant). ``geometry="plane_parallel"`` flattens the
+    metadata (samples, time, throughput, variant). Pixels outside the scene's
+    ``render.region`` are not traced and are NaN. ``geometry="plane_parallel"`` flattens the
     planet (for comparisons with plane-parallel solvers such as DISORT); ``estimator`` picks
     the integrator's estimator (see :data:`skyref.plugins.integrator.ESTIMATORS`).
     """
-    check_choice("geometry", geometry, GEOMETRIES)
-    scene.check_files()
-    settings = RenderSettings(spp=scene.render.spp if spp is None else spp,
-                              passes=scene.render.passes if passes is None else passes,
-                              seed=scene.render.seed if seed is None else seed,
-                              max_depth=scene.render.max_depth, pixel_sampling=scene.render.pixel_sampling)
+    settings = _settings(scene, spp, passes, seed)
     if settings.spp < settings.passes:
         raise ParameterError("spp", settings.spp, f">= passes ({settings.passes})", "too few samples")
-    check_image_size(scene, settings.passes)
+    scene = scene.replace(render=settings)
+    renderer = _PixelRenderer(scene, variant, geometry, wavelengths_per_path, estimator)
+    pixels = rendered_pixels(scene)
     spp_per_pass = settings.spp // settings.passes
-
-    mi = load_mitsuba(variant)
-    integrator = build_integrator(scene.replace(render=settings), geometry, wavelengths_per_path, estimator)
-    sensor = mi.load_dict(sensor_dict(scene.camera))
-    if scene.objects:
-        try:
-            integrator.objects = mi.load_dict({"type": "scene", **{f"object_{i}": item.mitsuba_dict()
-                                                                   for i, item in enumerate(scene.objects)}})
-        except RuntimeError as exc:    # an unreadable mesh: Mitsuba's message, first line
-            raise ParameterError("objects", [item.filename or item.type for item in scene.objects],
-                                 "shapes Mitsuba can load", str(exc).strip().splitlines()[0][:200]) from None
-    camera = scene.camera
 
     bar = None
     if progress:
         bar = tqdm(total=settings.passes * spp_per_pass, unit="spp", desc=f"render {scene.name or 'sky'}")
     start = time.perf_counter()
-    per_pass = integrator.render_orders(                 # (P, H, W, orders, N)
-        sensor, seed=settings.seed % (1 << 32), spp=spp_per_pass, pixel_centres=settings.pixel_sampling == "centre",
-        batches=settings.passes,
-        progress=None if bar is None else (lambda count: bar.update(count * settings.passes))).numpy()
+    per_pass = renderer.passes(pixels, spp_per_pass, settings.passes, settings.seed,
+                               None if bar is None else (lambda count: bar.update(count * settings.passes)))
     elapsed = time.perf_counter() - start
     if bar is not None:
         bar.close()
 
-    orders_mean = per_pass.mean(axis=0)
-    radiance_passes = per_pass.sum(axis=3)            # (P, H, W, N)
-    radiance = radiance_passes.mean(axis=0)
+    radiance_passes = per_pass.sum(axis=2)             # (P, M, N)
     standard_error = radiance_passes.std(axis=0, ddof=1) / math.sqrt(settings.passes)
-    samples = camera.width * camera.height * spp_per_pass * settings.passes
-    metadata = {"skyref_version": __version__, "integrator": "atmosphere", "variant": mi.variant(),
-                "geometry": geometry, "estimator": integrator.estimator,
-                "spp": spp_per_pass * settings.passes, "passes": settings.passes,
-                "seed": settings.seed, "wavelengths_per_path": integrator.channels,
-                "render_time_s": elapsed, "samples_per_second": samples / elapsed}
-    return Sky(radiance=radiance.astype(np.float32), standard_error=standard_error.astype(np.float32),
-               wavelengths_nm=np.asarray(scene.wavelengths_nm, dtype=np.float64),
-               directions=pixel_directions(camera),
-               orders={name: orders_mean[..., i, :].astype(np.float32) for i, name in enumerate(ORDER_NAMES)},
-               scene=scene, metadata=metadata)
+    spp_total = spp_per_pass * settings.passes
+    metadata = renderer.metadata(spp_total, settings.passes, settings.seed, elapsed, pixels.size * spp_total)
+    return _sky(scene, pixels, radiance_passes.mean(axis=0), standard_error, per_pass.mean(axis=0), metadata)
 
 
 def relative_error_percentile(sky: Sky, percentile: float = 95.0) -> float:
@@ -151,46 +202,98 @@ def relative_error_percentile(sky: Sky, percentile: float = 95.0) -> float:
     return float(np.percentile(finite, percentile)) if finite.size else 0.0
 
 
-def combine_skies(skies: list) -> Sky:
-    """Pool independent renders of one scene: the mean weighted by samples per pixel, with
-    standard error sqrt(sum_i (n_i / n)^2 SE_i^2)."""
-    counts = np.array([s.metadata["spp"] for s in skies], dtype=np.float64)
-    weights = counts / counts.sum()
-    first = skies[0]
-    radiance = sum(w * s.radiance.astype(np.float64) for w, s in zip(weights, skies))
-    variance = sum((w * s.standard_error.astype(np.float64)) ** 2 for w, s in zip(weights, skies))
-    orders = {name: sum(w * s.orders[name].astype(np.float64) for w, s in zip(weights, skies)).astype(np.float32)
-              for name in first.orders}
-    render_time = sum(s.metadata["render_time_s"] for s in skies)
-    samples = sum(s.metadata["samples_per_second"] * s.metadata["render_time_s"] for s in skies)
-    metadata = dict(first.metadata, spp=int(counts.sum()), passes=sum(s.metadata["passes"] for s in skies),
-                    seed=[s.metadata["seed"] for s in skies], render_time_s=render_time,
-                    samples_per_second=samples / render_time)
-    return Sky(radiance=radiance.astype(np.float32), standard_error=np.sqrt(variance).astype(np.float32),
-               wavelengths_nm=first.wavelengths_nm, directions=first.directions, orders=orders,
-               scene=first.scene, metadata=metadata)
+def pixel_relative_error(radiance: np.ndarray, standard_error: np.ndarray) -> np.ndarray:
+    """Per pixel, the largest standard error / radiance over the wavelengths (last axis): 0 for
+    a pixel that is black with no error, inf where a radiance of 0 has an error."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(radiance > 0, standard_error / radiance, np.where(standard_error > 0, np.inf, 0.0))
+    return ratio.max(axis=-1)
+
+
+class PixelPool:
+    """Independent estimates of the same M pixels pooled per pixel, each weighted by its number of
+    samples: mean = sum_i n_i x_i / n, standard error sqrt(sum_i (n_i / n)^2 SE_i^2), with n_i
+    the samples of estimate i at that pixel (pixels may have different counts)."""
+
+    def __init__(self, pixels: int, orders: int, wavelengths: int):
+        self.samples = np.zeros(pixels, dtype=np.int64)
+        self.orders = np.zeros((pixels, orders, wavelengths))      # mean per order
+        self.variance = np.zeros((pixels, wavelengths))            # of the mean radiance
+
+    @property
+    def radiance(self) -> np.ndarray:
+        return self.orders.sum(axis=1)
+
+    @property
+    def standard_error(self) -> np.ndarray:
+        return np.sqrt(self.variance)
+
+    def add(self, pixels: np.ndarray, samples: int, orders: np.ndarray, standard_error: np.ndarray) -> None:
+        """Pool an estimate of ``pixels`` (indices into the pool) from ``samples`` samples each:
+        its per-order means (len(pixels), orders, N) and standard error (len(pixels), N)."""
+        before = self.samples[pixels]
+        total = before + samples
+        old, new = (before / total)[:, None], (samples / total)[:, None]
+        self.orders[pixels] = old[..., None] * self.orders[pixels] + new[..., None] * orders
+        self.variance[pixels] = old ** 2 * self.variance[pixels] + new ** 2 * standard_error.astype(np.float64) ** 2
+        self.samples[pixels] = total
 
 
 def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, initial_spp: int | None = None,
                     variant: str | None = None) -> Sky:
-    """Render ``scene`` in rounds until :func:`relative_error_percentile` (95th) is at most
-    ``target_relative_error`` or ``max_spp`` samples per pixel are spent. Round r uses seed
-    ``seeds[r]`` (so rounds are independent); each round after the first is sized by the
-    1/sqrt(spp) law with 10% margin. The sky's metadata records the error reached."""
+    """Render ``scene`` until every rendered pixel's :func:`pixel_relative_error` is at most
+    ``target_relative_error``, or it has had ``max_spp`` samples: adaptive per direction, so a
+    dark pixel costs its own samples, not the sky's.
+
+    Round r uses seed ``seeds[r]`` (rounds are independent). The first gives every pixel
+    ``initial_spp``; each later one gives each pixel still above the target what the
+    1/sqrt(spp) law asks for (with a ROUND_MARGIN), rounded up to ``passes`` x a power of two
+    (so a round is a few launches, one per count), within ``max_spp``. The sky's metadata
+    records the mean, smallest and largest samples per pixel, the share of pixels at the
+    target and the 95th percentile of the relative error."""
+    check_number("target_relative_error", target_relative_error, 1e-5, 1.0)
     passes = scene.render.passes
-    spp = initial_spp or max(16 * passes, 64)
-    skies = [render_sky(scene, spp=min(spp, max_spp), seed=seeds[0], variant=variant)]
-    sky = skies[0]
-    error = relative_error_percentile(sky)
-    for seed in seeds[1:]:
-        spent = sky.metadata["spp"]
-        if error <= target_relative_error or spent >= max_spp:
-            break
-        needed = math.ceil(1.1 * spent * (error / target_relative_error) ** 2)
-        extra = min(max(needed - spent, passes), max_spp - spent)
-        extra = max(passes, extra - extra % passes)
-        skies.append(render_sky(scene, spp=extra, seed=seed, variant=variant))
-        sky = combine_skies(skies)
-        error = relative_error_percentile(sky)
-    sky.metadata.update(target_relative_error=target_relative_error, relative_error_p95=error)
+    spp = min(initial_spp or max(16 * passes, 64), max_spp)
+    if spp < passes:
+        raise ParameterError("max_spp", max_spp, f">= passes ({passes})", "too few samples")
+    scene = scene.replace(render=_settings(scene, spp, None, seeds[0]))
+    renderer = _PixelRenderer(scene, variant, "spherical", 0, None)
+    pixels = rendered_pixels(scene)
+    pool = PixelPool(pixels.size, len(ORDER_NAMES), len(scene.wavelengths_nm))
+    elapsed, used_seeds = 0.0, []
+
+    def trace(members, spp_per_pass, seed):
+        nonlocal elapsed
+        start = time.perf_counter()
+        per_pass = renderer.passes(pixels[members], spp_per_pass, passes, seed)
+        elapsed += time.perf_counter() - start
+        standard_error = per_pass.sum(axis=2).std(axis=0, ddof=1) / math.sqrt(passes)
+        pool.add(members, spp_per_pass * passes, per_pass.mean(axis=0), standard_error)
+
+    for round_index, seed in enumerate(seeds):
+        if round_index == 0:
+            trace(np.arange(pixels.size), spp // passes, seed)
+        else:
+            error = pixel_relative_error(pool.radiance, pool.standard_error)
+            with np.errstate(invalid="ignore", over="ignore"):
+                wanted = np.ceil(ROUND_MARGIN * pool.samples * (error / target_relative_error) ** 2) - pool.samples
+            room = (max_spp - pool.samples) // passes                  # samples per pass left
+            counts = 2 ** np.ceil(np.log2(np.maximum(np.nan_to_num(wanted, posinf=max_spp) / passes, 1.0)))
+            counts = np.minimum(counts, 2 ** np.floor(np.log2(np.maximum(room, 1))))
+            active = (error > target_relative_error) & (room >= 1)
+            if not active.any():
+                break
+            for count in np.unique(counts[active]).astype(int):
+                members = np.flatnonzero(active & (counts == count))
+                trace(members, int(count), (seed + 0x9E3779B1 * int(count).bit_length()) % (1 << 31))
+        used_seeds.append(seed)
+
+    error = pixel_relative_error(pool.radiance, pool.standard_error)
+    samples = int(pool.samples.sum())
+    metadata = renderer.metadata(round(samples / max(pixels.size, 1)), passes, used_seeds, elapsed, samples)
+    metadata.update(target_relative_error=target_relative_error,
+                    spp_range=[int(pool.samples.min()), int(pool.samples.max())] if pixels.size else [0, 0],
+                    pixels_at_target=float(np.mean(error <= target_relative_error)) if pixels.size else 1.0)
+    sky = _sky(scene, pixels, pool.radiance, pool.standard_error, pool.orders, metadata)
+    sky.metadata["relative_error_p95"] = relative_error_percentile(sky)
     return sky

@@ -28,8 +28,8 @@ from skyref.validation import check_array, check_choice, check_fields, check_num
 from skyref.errors import ParameterError
 from skyref.io.atomic import atomic_write
 
-__all__ = ["direction_from_angles", "Sun", "Observer", "CAMERA_TYPES", "Camera", "PIXEL_SAMPLING", "RenderSettings",
-           "OBJECT_TYPES", "SceneObject", "MAX_NAME_LENGTH", "MAX_WAVELENGTHS", "Scene", "atmosphere_from_scene_dict",
+__all__ = ["direction_from_angles", "Sun", "Observer", "CAMERA_TYPES", "Camera", "PIXEL_SAMPLING", "RENDER_REGIONS",
+           "RenderSettings", "OBJECT_TYPES", "SceneObject", "MAX_NAME_LENGTH", "MAX_WAVELENGTHS", "Scene", "atmosphere_from_scene_dict",
            "defaulted_tables", "load_scene", "save_scene"]
 
 
@@ -179,6 +179,7 @@ class Camera:
 
 
 PIXEL_SAMPLING = ("area", "centre")
+RENDER_REGIONS = ("all", "above_horizon")
 
 
 @dataclass(frozen=True)
@@ -187,13 +188,16 @@ class RenderSettings:
     pixel's standard error), the longest path (scattering events + 1) and where in a pixel
     the samples look: ``"area"`` (uniformly over the pixel: an image, box filter) or
     ``"centre"`` (the pixel-centre direction only: radiance along exact directions, which is
-    what other sky methods evaluate, e.g. in audits)."""
+    what other sky methods evaluate, e.g. in audits); and which pixels are traced: ``"all"``, or
+    ``"above_horizon"``, those whose centre looks at or above the observer's horizon (view
+    zenith <= 90 deg; the others are NaN), for consumers of the sky alone."""
 
     spp: int = 64
     seed: int = 0
     passes: int = 16
     max_depth: int = 64
     pixel_sampling: str = "area"
+    region: str = "all"
 
     def __post_init__(self):
         for name, lo, hi in (("spp", 1, 1 << 24), ("seed", 0, (1 << 31) - 1), ("passes", 2, 1024),
@@ -202,6 +206,7 @@ class RenderSettings:
             if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
                 raise ParameterError(f"render.{name}", value, f"an integer in [{lo}, {hi}]", "invalid")
         check_choice("render.pixel_sampling", self.pixel_sampling, PIXEL_SAMPLING)
+        check_choice("render.region", self.region, RENDER_REGIONS)
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)

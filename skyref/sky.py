@@ -7,15 +7,21 @@ same shape, from the spread of independent passes) and its decomposition by scat
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["ORDER_NAMES", "TIMING_METADATA", "Sky"]
+from skyref.errors import ParameterError
+
+__all__ = ["ORDER_NAMES", "SAVE_FORMATS", "TIMING_METADATA", "Sky"]
 
 #: Names of the per-order layers: the sun seen directly (through the atmosphere), light
 #: scattered once, twice, and three or more times (a ground reflection counts as a scattering).
 ORDER_NAMES = ("sun_direct", "single", "double", "higher")
+
+#: File extensions :meth:`Sky.save` writes, and what each holds.
+SAVE_FORMATS = {".exr": "spectral OpenEXR", ".png": "tone-mapped sRGB preview"}
 
 #: Metadata that differ between runs of the same render (timings): shown to the user, kept in
 #: batch markers and manifests, never written into data files, so that the same seed gives the
@@ -53,3 +59,19 @@ class Sky:
         from skyref.color import spectral_to_luminance  # lazy: colour-science's import cost
 
         return spectral_to_luminance(self.radiance, self.wavelengths_nm)
+
+    def save(self, path, **options) -> None:
+        """Write the sky to ``path``, by its extension: ``.exr``, the spectral OpenEXR
+        (:func:`skyref.io.exr.write_sky_exr`; ``options``: ``layers``, ``half``), or ``.png``, the
+        tone-mapped sRGB preview (:func:`skyref.io.png.write_png`; ``options``: ``exposure``,
+        ``annotate``)."""
+        # Lazy: the writers import this module (a cycle at import time), and this module stays
+        # light for everything that only passes skies around.
+        from skyref.io.exr import write_sky_exr
+        from skyref.io.png import write_png
+
+        extension = os.path.splitext(os.fspath(path))[1].lower()
+        if extension not in SAVE_FORMATS:
+            raise ParameterError("path", os.fspath(path), ", ".join(f"a {e} file ({kind})" for e, kind in
+                                                                   SAVE_FORMATS.items()), "unknown file extension")
+        (write_sky_exr if extension == ".exr" else write_png)(self, path, **options)

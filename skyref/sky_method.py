@@ -17,6 +17,7 @@ import time
 
 from tqdm import tqdm
 
+from skyref._llvm import configure_libllvm
 from skyref.validation import check_choice, check_view
 from skyref.errors import ParameterError
 
@@ -34,6 +35,7 @@ class Registry:
     def cls(self, name: str):
         """The class registered as ``name`` (a ParameterError listing the names otherwise)."""
         module, cls = self.entries[check_choice(self.parameter, name, tuple(self.entries))]
+        configure_libllvm()  # LUT methods import Dr.Jit, which loads libLLVM when it is imported
         return getattr(importlib.import_module(module), cls)
 
     def check_options(self, name: str, options, factory=None, parameter: str = "option",

@@ -192,46 +192,6 @@ def test_rgb_dataset_holds_the_colorimetric_rgb_of_each_exr(tmp_path):
         assert data.spp.values[i] == marker["spp"] == 8
 
 
-def _synthetic_sky(radiance, standard_error, spp):
-    from skyref.sky import Sky
-
-    shape = np.shape(radiance)
-    return Sky(radiance=np.asarray(radiance, np.float32), standard_error=np.asarray(standard_error, np.float32),
-               wavelengths_nm=np.array([550.0]), directions=np.zeros(shape[:2] + (3,)),
-               orders={"single": np.asarray(radiance, np.float32)},
-               metadata={"spp": spp, "passes": 2, "seed": 0, "render_time_s": 1.0, "samples_per_second": 10.0})
-
-
-def test_combining_renders_weights_by_samples():
-    from skyref.render import combine_skies
-
-    a = _synthetic_sky([[[1.0]]], [[[0.4]]], spp=10)
-    b = _synthetic_sky([[[4.0]]], [[[0.1]]], spp=30)
-    both = combine_skies([a, b])
-    # mean = (10 * 1 + 30 * 4) / 40; variance of a weighted mean of independent estimates
-    assert both.radiance[0, 0, 0] == pytest.approx(3.25)
-    assert both.standard_error[0, 0, 0] == pytest.approx(np.hypot(0.25 * 0.4, 0.75 * 0.1))
-    assert both.metadata["spp"] == 40 and both.orders["single"][0, 0, 0] == pytest.approx(3.25)
-
-
-def test_render_to_error_reaches_its_target_with_honest_error_bars(mi):
-    """A target-error render stops at the target, and its radiance agrees with an independent
-    high-sample render within its stated standard error (chi-square of the z-scores)."""
-    from skyref.render import relative_error_percentile, render_sky, render_to_error
-    from skyref.scene import Camera, RenderSettings, Scene, Sun
-
-    scene = Scene(sun=Sun(zenith_deg=40.0), camera=Camera(width=8, height=4), wavelengths="rgb",
-                  render=RenderSettings(passes=16))
-    sky = render_to_error(scene, 0.05, seeds=list(range(11, 19)), max_spp=8192)
-    assert relative_error_percentile(sky) <= 0.05
-    assert sky.metadata["spp"] < 8192 and len(sky.metadata["seed"]) >= 2
-    reference = render_sky(scene, spp=8192, passes=16, seed=99)
-    z = (sky.radiance - reference.radiance) / np.hypot(sky.standard_error, reference.standard_error)
-    z = z[np.isfinite(z)]
-    assert z.size == 8 * 4 * 3
-    assert 0.5 < np.mean(z ** 2) < 1.8, np.mean(z ** 2)
-
-
 def test_runs_on_a_given_dask_scheduler(tmp_path):
     """--scheduler: the same grid on an external dask cluster gives the same skies."""
     from dask.distributed import LocalCluster

@@ -1,7 +1,8 @@
 """``skyref report``: the speed-vs-error map (:mod:`skyref.audit.speed_map`) written out as
 ``results/README.md`` (one table of every method, the index of the other reports), a Pareto plot
-(``results/report/pareto.png``), a contact sheet of the same skies by every method with their
-error maps (``results/report/contact_sheet.png``) and the numbers ``skyref advise`` reads
+(``results/report/pareto.png``, every point labelled, no two labels overlapping), a contact
+sheet of the same skies by every method as sky domes with their error maps on a colour scale
+fitted to the data (``results/report/contact_sheet.png``) and the numbers ``skyref advise`` reads
 (``results/report/map.json``). Every number is computed by the code from the cached rows.
 """
 
@@ -16,14 +17,23 @@ import numpy as np
 
 from skyref.audit.speed_map import FRAME_DIRECTIONS, KINDS, MAP_SKIES, cache_path, load_cached
 from skyref.color import default_exposure, spectral_to_linear_srgb, srgb_luminance, tonemap_srgb8
+from skyref.errors import ParameterError
 from skyref.io.atomic import atomic_path, atomic_write
 from skyref.io.exr import read_sky_exr
+from skyref.projection import equirectangular_pixel, fisheye_direction
 
-__all__ = ["ERROR_SCALE", "OTHER_REPORTS", "contact_entries", "map_table", "plot_contact_sheet", "plot_pareto",
-           "write_map_report"]
+__all__ = ["ERROR_LINEAR", "LABEL_DIRECTIONS", "LABEL_RINGS_PT", "MARKER_SIZE_PT", "OTHER_REPORTS", "PARETO_DPI",
+           "contact_entries", "contact_sheet_figure", "error_norm", "map_table", "pareto_figure",
+           "plot_contact_sheet", "plot_pareto", "sky_dome", "write_map_report"]
 
-#: Relative luminance error at the ends of the contact sheet's colour scale.
-ERROR_SCALE = 0.25
+#: Relative luminance error within which the contact sheet's symmetric-log colour scale is linear.
+ERROR_LINEAR = 0.01
+#: Pareto plot: marker size (points across), resolution (dots per inch), and the offsets tried for
+#: a label (points from its marker: rings of growing radius, LABEL_DIRECTIONS directions each).
+MARKER_SIZE_PT = 6.5
+PARETO_DPI = 120
+LABEL_RINGS_PT = (5, 12, 20, 30, 42, 56, 72, 90, 115, 145)
+LABEL_DIRECTIONS = 16
 #: Other reports of results/, indexed by README.md: (file, what it holds).
 OTHER_REPORTS = (("lut_audit.md", "LUT methods over the standard grid (168 skies) with resolution / order / "
                   "precision sweeps: `python benchmarks/lut_audit.py`"),
@@ -58,7 +68,79 @@ def map_table(summaries: list[dict]) -> list[str]:
     return lines
 
 
-def plot_pareto(summaries: list[dict], path: str):
+def _distance(point, box) -> float:
+    """Display-space distance from ``point`` to the Bbox ``box`` (0 inside it)."""
+    return float(np.hypot(max(box.x0 - point[0], 0.0, point[0] - box.x1), max(box.y0 - point[1], 0.0, point[1] - box.y1)))
+
+
+def _place_labels(ax, points, texts, renderer, fontsize: float = 7.0) -> list:
+    """Annotate each data point of ``points`` with its text; returns the annotations.
+
+    Placement in display space, greedy in the order given: of the offsets of
+    :data:`LABEL_RINGS_PT` x :data:`LABEL_DIRECTIONS` (nearest ring first, each ring from the
+    upper right anticlockwise), the first whose box (1 pt margin) lies inside the axes, clear of
+    every marker, every label placed before and their leader lines, whose leader line crosses no
+    other label or marker (bar those on top of its own), and which, on the first ring (no leader
+    line), is nearer its own marker than any other by a marker's width. Labels beyond the first
+    ring get a leader line. Where no offset meets all of that, the first with the fewest
+    collisions of its box, then of its leader line, then unambiguous.
+    Deterministic.
+    """
+    from matplotlib.path import Path  # lazy: matplotlib stays off the ``skyref --help`` path
+    from matplotlib.transforms import Bbox
+
+    radius_px = renderer.points_to_pixels(MARKER_SIZE_PT) / 2.0
+    margin_px = renderer.points_to_pixels(1.0)
+    centres = ax.transData.transform(points)
+    markers = [Bbox.from_bounds(x - radius_px, y - radius_px, 2 * radius_px, 2 * radius_px) for x, y in centres]
+    frame = ax.get_window_extent(renderer)
+    boxes, leaders, annotations = [], [], []
+    for k, (point, text) in enumerate(zip(points, texts)):
+        # A leader line starts inside the markers on top of its own: those cannot be avoided.
+        others = [m for m in markers if not m.overlaps(markers[k])]
+        best = None
+        for ring, radius in enumerate(LABEL_RINGS_PT):
+            for i in range(LABEL_DIRECTIONS):
+                angle = np.pi / 4 + 2 * np.pi * i / LABEL_DIRECTIONS
+                dx, dy = radius * np.cos(angle), radius * np.sin(angle)
+                ha = "left" if dx > 0.3 * radius else "right" if dx < -0.3 * radius else "center"
+                va = "bottom" if dy > 0.3 * radius else "top" if dy < -0.3 * radius else "center"
+                label = ax.annotate(text, point, xytext=(dx, dy), textcoords="offset points", ha=ha, va=va,
+                                    fontsize=fontsize)
+                box = label.get_window_extent(renderer)
+                label.remove()
+                padded = box.padded(margin_px)
+                leader = Path([centres[k], centres[k] + margin_px * np.array([dx, dy])]) if ring else None
+                collisions = sum(padded.overlaps(b) for b in boxes + markers)
+                collisions += sum(p.intersects_bbox(padded, filled=False) for p in leaders)
+                collisions += not (frame.x0 <= padded.x0 and padded.x1 <= frame.x1
+                                   and frame.y0 <= padded.y0 and padded.y1 <= frame.y1)
+                crossings = 0 if leader is None else sum(leader.intersects_bbox(b, filled=False) for b in boxes + others)
+                # Without a leader line a label is read as belonging to the marker nearest to it:
+                # every other marker must be farther by a marker's width.
+                own = _distance(centres[k], box) + 2 * radius_px
+                ambiguous = leader is None and any(_distance(c, box) < own for j, c in enumerate(centres) if j != k)
+                score = (collisions, crossings, ambiguous)
+                if best is None or score < best[0]:
+                    best = (score, ring, dx, dy, ha, va, padded, leader)
+                if score == (0, 0, False):
+                    break
+            if best[0] == (0, 0, False):
+                break
+        _, ring, dx, dy, ha, va, padded, leader = best
+        arrow = dict(arrowstyle="-", color="0.4", lw=0.5, shrinkA=0, shrinkB=MARKER_SIZE_PT / 2) if ring else None
+        annotations.append(ax.annotate(text, point, xytext=(dx, dy), textcoords="offset points", ha=ha, va=va,
+                                       fontsize=fontsize, arrowprops=arrow))
+        boxes.append(padded)
+        if leader is not None:
+            leaders.append(leader)
+    return annotations
+
+
+def pareto_figure(summaries: list[dict]):
+    """The Pareto plot of ``summaries`` (:func:`skyref.audit.speed_map.entry_summary`, or the
+    ``entries`` of map.json): sky luminance RMS error against the cost of the first frame and of
+    each further frame, every measured entry labelled without overlaps (:func:`_place_labels`)."""
     # Lazy: selecting the Agg backend is a side effect, made only when plots are written.
     import matplotlib
 
@@ -66,29 +148,45 @@ def plot_pareto(summaries: list[dict], path: str):
     import matplotlib.pyplot as plt
 
     families = {"path tracer": ("o", "C0"), "LUT": ("s", "C1"), "analytic": ("D", "C2")}
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4.8), sharey=True, constrained_layout=True)
+    measured = [s for s in summaries if "frame_s" in s]
+    fig, axes = plt.subplots(1, 2, figsize=(14, 6.5), dpi=PARETO_DPI, sharey=True, layout="constrained")
     panels = ((axes[0], lambda s: s["frame_s"], f"one frame of {FRAME_DIRECTIONS:,} directions from scratch (s)"),
               (axes[1], lambda s: s["per_view_s"] + FRAME_DIRECTIONS * s["lookup_s"],
                "each further frame, tables kept (s)"))
+    errors = np.array([100 * s["sky_rms_median"] for s in measured])
     for ax, cost, xlabel in panels:
-        seen = set()
-        for s in summaries:
-            if "frame_s" not in s:
-                continue
-            marker, colour = families[s["family"]]
-            ax.scatter(cost(s), 100 * s["sky_rms_median"], marker=marker, color=colour, s=40,
-                       label=None if s["family"] in seen else s["family"])
-            seen.add(s["family"])
-            ax.annotate(f"{s['method']} {s['label']}", (cost(s), 100 * s["sky_rms_median"]), fontsize=6,
-                        xytext=(3, 3), textcoords="offset points")
+        costs = np.array([cost(s) for s in measured])
+        for family, (marker, colour) in families.items():
+            mine = [i for i, s in enumerate(measured) if s["family"] == family]
+            if mine:
+                ax.scatter(costs[mine], errors[mine], marker=marker, color=colour, s=MARKER_SIZE_PT ** 2,
+                           label=family, zorder=3)
         ax.set_xscale("log")
         ax.set_yscale("log")
+        # Room for the labels: the data span a middle part of each logarithmic axis.
+        ax.set_xlim(costs.min() / 3.0, costs.max() * 3.0)
+        ax.set_ylim(errors.min() / 1.6, errors.max() * 1.6)
         ax.set_xlabel(xlabel)
         ax.grid(alpha=0.3, which="both")
     axes[0].set_ylabel("sky luminance RMS error (%), median of the map's skies")
-    axes[0].legend()
+    fig.legend(*axes[0].get_legend_handles_labels(), loc="outside upper center", ncols=len(families), frameon=False)
+    # Labels are placed on the final layout: lay the figure out once, then keep it.
+    fig.canvas.draw()
+    fig.set_layout_engine("none")
+    renderer = fig.canvas.get_renderer()
+    texts = [f"{s['method']} {s['label']}" for s in measured]
+    for ax, cost, _ in panels:
+        _place_labels(ax, [(cost(s), 100 * s["sky_rms_median"]) for s in measured], texts, renderer)
+    return fig
+
+
+def plot_pareto(summaries: list[dict], path: str):
+    """Write :func:`pareto_figure` of ``summaries`` to the PNG ``path``."""
+    import matplotlib.pyplot as plt  # lazy: matplotlib stays off the ``skyref --help`` path
+
+    fig = pareto_figure(summaries)
     with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=120, format="png")
+        fig.savefig(tmp, dpi="figure", format="png")
     plt.close(fig)
 
 
@@ -100,55 +198,135 @@ def contact_entries(entries) -> list:
     return list(first.values())
 
 
-def plot_contact_sheet(entries, skies, cache_dir: str, path: str):
-    """Rows: the ground truth, then every method's default setting; per sky two columns: the
-    tone-mapped image (the truth's exposure) and the relative luminance error."""
+def sky_dome(image, directions, size: int) -> np.ndarray:
+    """``image`` (H, W, ...) of an equirectangular map, resampled (nearest pixel) to a ``size`` x
+    ``size`` upward equidistant fisheye of the sky dome (:func:`skyref.projection.fisheye_direction`
+    at 180°: zenith in the centre, horizon on the image circle, north up, east left), as float64.
+    NaN outside the circle and where the nearest map pixel's centre (``directions``: the map's
+    (H, W, 3) east-north-up pixel-centre directions) is not above the horizon."""
+    centres = (np.arange(size) + 0.5) / size
+    v, u = np.meshgrid(centres, centres, indexing="ij")
+    x, y, z, inside = fisheye_direction(u, v, 180.0)
+    map_u, map_v = equirectangular_pixel(np.stack([x, y, z], axis=-1))
+    height, width = image.shape[:2]
+    rows = np.minimum((map_v * height).astype(int), height - 1)
+    columns = np.minimum((map_u * width).astype(int), width - 1)
+    dome = np.asarray(image, dtype=np.float64)[rows, columns]
+    dome[~(inside & (np.asarray(directions)[rows, columns, 2] > 0.0))] = np.nan
+    return dome
+
+
+def error_norm(errors):
+    """The contact sheet's colour scale of relative errors: symmetric logarithmic, linear within
+    ±:data:`ERROR_LINEAR`, ending at the largest finite ``|error|`` (at least ERROR_LINEAR), so
+    that no error saturates it. Returns (norm, that largest error)."""
+    from matplotlib.colors import SymLogNorm  # lazy: matplotlib stays off the ``skyref --help`` path
+
+    values = np.abs(np.concatenate([np.ravel(e) for e in errors] or [np.zeros(0)]))
+    values = values[np.isfinite(values)]
+    limit = max(ERROR_LINEAR, float(values.max()) if values.size else 0.0)
+    return SymLogNorm(ERROR_LINEAR, vmin=-limit, vmax=limit, base=10), limit
+
+
+def _error_ticks(limit: float) -> list[float]:
+    """0, ±ERROR_LINEAR, ± every decade above it below ``limit`` / 2, and ±``limit`` (no tick
+    below -100%: a relative error cannot be)."""
+    decades = [ERROR_LINEAR * 10.0 ** k for k in range(int(np.log10(limit / ERROR_LINEAR)) + 1)]
+    ends = sorted({d for d in decades if d <= limit / 2} | {ERROR_LINEAR, limit})
+    return sorted({-min(e, 1.0) for e in ends}) + [0.0] + ends
+
+
+def contact_sheet_figure(entries, skies, cache_dir: str):
+    """Rows: the ground truth, then every method's default setting (:func:`contact_entries`);
+    per kind of sky (its first sky in ``skies``, (MapSky, truth EXR path) pairs) two columns: the
+    sky dome (:func:`sky_dome`) tone-mapped with the truth's exposure, and the method's relative
+    luminance error on :func:`error_norm`'s scale. Rows cached by
+    :func:`skyref.audit.speed_map.evaluate_map` in ``cache_dir``; an entry without a cached
+    image is shown as refused."""
     # Lazy: selecting the Agg backend is a side effect, made only when plots are written.
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter
 
-    sheet_skies = [next((s, p) for s, p in skies if s.kind == kind) for kind in KINDS]
+    first = {}
+    for sky, sky_path in skies:
+        first.setdefault(sky.kind, (sky, sky_path))
+    sheet_skies = [first[kind] for kind in KINDS if kind in first]
     truths = []
     for _, sky_path in sheet_skies:
         truth = read_sky_exr(sky_path)
+        camera = truth.scene.camera.type if truth.scene is not None else "no"
+        if camera != "equirectangular":
+            raise ParameterError("skies", sky_path, "ground truth of an equirectangular camera", f"{camera} camera")
         rgb = spectral_to_linear_srgb(truth.radiance - truth.orders.get("sun_direct", 0.0), truth.wavelengths_nm)
-        truths.append((rgb, default_exposure(rgb)))
+        truths.append((rgb, default_exposure(rgb), truth.directions, 2 * rgb.shape[0]))
     rows = [("ground truth", None)] + [(f"{e.method}\n{e.label}", e) for e in contact_entries(entries)]
-    fig, axes = plt.subplots(len(rows), 2 * len(sheet_skies), figsize=(4.2 * len(sheet_skies), 1.15 * len(rows)),
-                             constrained_layout=True)
-    image = None
-    for i, (label, entry) in enumerate(rows):
-        for j, ((sky, _), (truth_rgb, exposure)) in enumerate(zip(sheet_skies, truths)):
-            ax_image, ax_error = axes[i, 2 * j], axes[i, 2 * j + 1]
-            for ax in (ax_image, ax_error):
-                ax.set_xticks([])
-                ax.set_yticks([])
-            if i == 0:
-                ax_image.set_title(sky.name, fontsize=8)
-                ax_error.set_title("relative luminance error", fontsize=7)
-            if j == 0:
-                ax_image.set_ylabel(label, fontsize=7, rotation=0, ha="right", va="center")
+    # Every panel first: the error scale is fitted to all of them.
+    panels = {}
+    for i, (_, entry) in enumerate(rows):
+        for j, ((sky, _), (truth_rgb, exposure, directions, size)) in enumerate(zip(sheet_skies, truths)):
             rgb = truth_rgb
             if entry is not None:
                 cached = cache_path(cache_dir, entry, sky)
                 rgb = load_cached(cached)[1] if os.path.exists(cached) else None
             if rgb is None:
-                ax_image.text(0.5, 0.5, "refused / not run", ha="center", va="center", fontsize=7)
-                ax_error.set_facecolor("0.85")
+                panels[i, j] = None
                 continue
             rgb = np.asarray(rgb, dtype=np.float64)
-            ax_image.imshow(tonemap_srgb8(rgb, exposure), interpolation="nearest", aspect="auto")
-            if entry is None:
-                ax_error.set_facecolor("white")
-                continue
-            with np.errstate(divide="ignore", invalid="ignore"):
-                error = srgb_luminance(rgb) / srgb_luminance(truth_rgb) - 1.0
-            image = ax_error.imshow(error, cmap="RdBu_r", vmin=-ERROR_SCALE, vmax=ERROR_SCALE,
-                                    interpolation="nearest", aspect="auto")
-    if image is not None:
-        fig.colorbar(image, ax=axes[:, -1], shrink=0.3, label="method / truth - 1 (luminance)")
+            image = sky_dome(tonemap_srgb8(rgb, exposure), directions, size) / 255.0
+            image = np.dstack([np.nan_to_num(image), np.isfinite(image[..., :1])])   # RGBA, clear off the dome
+            error = None
+            if entry is not None:
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    error = sky_dome(srgb_luminance(rgb) / srgb_luminance(truth_rgb) - 1.0, directions, size)
+            panels[i, j] = (image, error)
+    norm, limit = error_norm([p[1] for p in panels.values() if p is not None and p[1] is not None])
+    fig, axes = plt.subplots(len(rows), 2 * len(sheet_skies), figsize=(2.4 * len(sheet_skies) + 3.2, 1.2 * len(rows)),
+                             squeeze=False, layout="constrained")
+    mappable = None
+    for (i, j), panel in panels.items():
+        label, _ = rows[i]
+        sky, size = sheet_skies[j][0], truths[j][3]
+        ax_image, ax_error = axes[i, 2 * j], axes[i, 2 * j + 1]
+        for ax in (ax_image, ax_error):
+            ax.set_xticks([])
+            ax.set_yticks([])
+            ax.set_aspect("equal")
+            ax.spines[:].set_visible(False)
+        if i == 0:
+            ax_image.set_title(sky.name, fontsize=8)
+            ax_error.set_title("luminance error", fontsize=7)
+        if j == 0:
+            ax_image.set_ylabel(label, fontsize=7, rotation=0, ha="right", va="center")
+        if panel is None:
+            ax_image.text(0.5, 0.5, "refused /\nnot run", ha="center", va="center", fontsize=7,
+                          transform=ax_image.transAxes)
+            continue
+        image, error = panel
+        ax_image.imshow(image, interpolation="nearest")
+        if error is not None:
+            mappable = ax_error.imshow(error, cmap="RdBu_r", norm=norm, interpolation="nearest")
+        for ax in ((ax_image, ax_error) if error is not None else (ax_image,)):
+            ax.add_patch(plt.Circle((size / 2 - 0.5, size / 2 - 0.5), size / 2, fill=False, lw=0.5, ec="0.6"))
+            ax.set_xlim(-0.5, size - 0.5)
+            ax.set_ylim(size - 0.5, -0.5)
+    if mappable is not None:
+        height_in = fig.get_size_inches()[1]
+        bar = fig.colorbar(mappable, ax=axes[:, -1], shrink=min(1.0, 5.0 / height_in), ticks=_error_ticks(limit),
+                           format=FuncFormatter(lambda value, _: f"{100 * value:+.3g}%" if value else "0"))
+        bar.set_label(f"method / truth - 1 (luminance)\nsymmetric log: linear within ±{100 * ERROR_LINEAR:g}%, "
+                      f"ends at ±{100 * limit:.3g}% (largest on the sheet)", fontsize=7)
+        bar.ax.tick_params(labelsize=7)
+    return fig
+
+
+def plot_contact_sheet(entries, skies, cache_dir: str, path: str):
+    """Write :func:`contact_sheet_figure` to the PNG ``path``."""
+    import matplotlib.pyplot as plt  # lazy: matplotlib stays off the ``skyref --help`` path
+
+    fig = contact_sheet_figure(entries, skies, cache_dir)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=80, format="png")
     plt.close(fig)
@@ -189,8 +367,10 @@ def write_map_report(entries, skies, rows, summaries, cache_dir: str, results_di
         *map_table(summaries), "",
         "![speed against error](report/pareto.png)", "",
         "## Contact sheet", "",
-        "The first sky of each kind by every method at its default setting (tone-mapped with the ground "
-        f"truth's exposure), each beside its relative luminance error (±{100 * ERROR_SCALE:.0f}%).", "",
+        "The first sky of each kind by every method at its default setting, as the sky dome (upward fisheye: "
+        "zenith in the centre, horizon on the circle, north up, east left; tone-mapped with the ground truth's "
+        "exposure), each beside its relative luminance error (symmetric logarithmic colour scale, linear "
+        f"within ±{100 * ERROR_LINEAR:g}%, ending at the largest error on the sheet).", "",
         "![contact sheet](report/contact_sheet.png)", "",
         "## Advice", "",
         "`skyref advise --scene SCENE --tolerance 2%` names the cheapest method meeting the tolerance on the "

@@ -16,7 +16,8 @@
     width = 64                               # optional camera overrides
     height = 32
     spp = 64                                 # samples per pixel, or instead:
-    # target_relative_error = 0.01           # render until the 95th percentile of stderr/radiance <= 1%
+    # target_relative_error = 0.01           # render each pixel until stderr/radiance <= 1% in every channel
+    # max_spp = 16384                        #   (or this many samples: skyref.render.render_to_error)
     passes = 16
     seed = 0
 
@@ -26,7 +27,9 @@ An axis is a path into the scene's TOML tables (``sun.zenith_deg``, ``observer.a
 scene (atmosphere entries override its preset as in a scene file); a value may be a whole table,
 e.g. ``atmosphere = [{preset = "bruneton2017"}, {preset = "bruneton2017", turbidity = 6.0}]``
 (the dataset labels such values by their JSON). Every axis value is checked
-by building the scene it makes, before any work starts, and errors name the axis.
+by building the scene it makes, before any work starts, and errors name the axis. In the
+dataset an axis is a dimension named by :func:`dimension_name` (``sun.zenith_deg`` ->
+``sun_zenith_deg``); two axes whose names would coincide are refused.
 
 Skies are numbered in C order over the axes (the last axis fastest); round r of sky i (a
 target-error render adds rounds until it is good enough) renders with seed
@@ -42,6 +45,7 @@ import itertools
 import json
 import math
 import os
+import re
 import tomllib
 from dataclasses import dataclass
 
@@ -53,7 +57,7 @@ from skyref.render import check_image_size
 from skyref.scene import Scene, load_scene
 
 __all__ = ["FORMATS", "AXIS_TABLES", "MAX_SPP_LIMIT", "MAX_ROUNDS", "MAX_SKIES", "MAX_AXIS_VALUES", "OutputSettings",
-           "SkySpec", "Grid", "load_grid"]
+           "dimension_name", "SkySpec", "Grid", "load_grid"]
 
 FORMATS = ("spectral", "rgb")
 #: Scene tables an axis may sweep (the camera, wavelengths and render settings fix the shape
@@ -102,6 +106,13 @@ class OutputSettings:
         check_int("output.seed", self.seed, 0, 1 << 16)
         if self.spp is not None and self.spp < self.passes:
             raise ParameterError("output.spp", self.spp, f">= output.passes ({self.passes})", "too few samples")
+
+
+def dimension_name(path: str) -> str:
+    """The dataset dimension of the axis at dotted ``path``: every character other than an ASCII
+    letter, digit or underscore becomes an underscore (a valid CF and netCDF name; paths start
+    with a scene table's name, so with a letter)."""
+    return re.sub(r"[^A-Za-z0-9_]", "_", path)
 
 
 def _set_path(data: dict, path: str, value) -> dict:
@@ -155,6 +166,11 @@ class Grid:
                 raise ParameterError(f"axes.{path}", values, "a list of numbers, strings or tables", "nested lists")
             if len({json.dumps(v, sort_keys=True) for v in values}) != len(values):
                 raise ParameterError(f"axes.{path}", values, "distinct values", "repeated value")
+        names = [dimension_name(path) for path in self.axes]
+        for path, name in zip(self.axes, names):
+            if names.count(name) > 1:
+                raise ParameterError(f"axes.{path}", name, "axis paths whose dataset dimension names (dots "
+                                     "and other punctuation as underscores) differ", "two axes share that name")
         if len(self) > MAX_SKIES:
             raise ParameterError("axes", " x ".join(f"{len(v):,}" for v in self.axes.values()) + f" = {len(self):,} skies",
                                  f"at most {MAX_SKIES:,} skies", "too many: split the sweep into several grids "

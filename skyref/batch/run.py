@@ -18,9 +18,11 @@ import os
 import time
 
 from skyref.batch.grid import MAX_ROUNDS, Grid
-from skyref.batch.store import BatchStore
+from skyref.batch.dataset import check_netcdf_size
+from skyref.batch.store import NETCDF, BatchStore
 from skyref.batch.worker import render_and_store
 from skyref.errors import ParameterError
+from skyref.extras import require
 
 __all__ = ["make_task", "SCHEDULER_TIMEOUT_S", "check_workers", "local_cluster", "connect", "run_batch"]
 
@@ -47,6 +49,7 @@ def check_workers(workers: int | None) -> int:
 def local_cluster(workers: int | None):
     """A LocalCluster of ``workers`` single-threaded processes (default: one per two cores,
     at least one) sharing this machine's memory; returns (cluster, Dr.Jit threads per worker)."""
+    require("batch")
     from dask.distributed import LocalCluster  # lazy: dask takes ~1 s to import (see module docstring)
 
     workers = check_workers(workers)
@@ -58,6 +61,7 @@ def local_cluster(workers: int | None):
 def connect(scheduler: str):
     """A client of the dask scheduler at ``scheduler``; a ParameterError if none answers within
     SCHEDULER_TIMEOUT_S seconds or the address is malformed."""
+    require("batch")
     from dask.distributed import Client  # lazy: dask's import cost
 
     valid = "the address of a running dask scheduler, e.g. tcp://host:8786"
@@ -71,10 +75,12 @@ def connect(scheduler: str):
 
 
 def run_batch(grid: Grid, scheduler: str | None = None, workers: int | None = None, variant: str | None = None,
-              verify: bool = False, progress: bool = True, log=print) -> dict:
+              verify: bool = False, progress: bool = True, log=print, netcdf: bool = False) -> dict:
     """Render every unfinished sky of ``grid``; returns the manifest (see
-    :class:`skyref.batch.store.BatchStore`) plus ``failed`` (sky id -> error message) and
-    ``wall_time_s``."""
+    :class:`skyref.batch.store.BatchStore`) plus ``failed`` (sky id -> error message),
+    ``wall_time_s`` and ``netcdf``: with ``netcdf``, the dataset is copied to ``dataset.nc``
+    once every sky is finished, and this is its path (else None)."""
+    require("batch")
     from dask.distributed import Client  # lazy: dask's import cost
 
     # Everything is checked, and the scheduler reached, before anything is written.
@@ -85,6 +91,8 @@ def run_batch(grid: Grid, scheduler: str | None = None, workers: int | None = No
         check_workers(workers)
     store = BatchStore(grid)
     store.check_writable()
+    if netcdf:
+        check_netcdf_size(grid, first_scene)
     cluster = None
     if scheduler is None:
         cluster, threads = local_cluster(workers)
@@ -92,14 +100,14 @@ def run_batch(grid: Grid, scheduler: str | None = None, workers: int | None = No
     else:
         client, threads = connect(scheduler), None
     try:
-        return _run(grid, store, first_scene, client, threads, variant, verify, progress, log)
+        return _run(grid, store, first_scene, client, threads, variant, verify, progress, log, netcdf)
     finally:
         client.close()
         if cluster is not None:
             cluster.close()
 
 
-def _run(grid, store, first_scene, client, threads, variant, verify, progress, log) -> dict:
+def _run(grid, store, first_scene, client, threads, variant, verify, progress, log, netcdf) -> dict:
     """The body of :func:`run_batch`, once the cluster is up."""
     from dask.distributed import as_completed  # lazy: dask's import cost
 
@@ -146,5 +154,11 @@ def _run(grid, store, first_scene, client, threads, variant, verify, progress, l
             if bar is not None:
                 bar.close()
         manifest = store.write_manifest()
-    manifest.update(failed=failed, wall_time_s=time.perf_counter() - start)
+        unfinished = len(grid) - manifest["skies_finished"]
+        if netcdf and not unfinished:
+            store.write_netcdf()
+        elif netcdf:
+            log(f"skyref batch: {NETCDF} not written: {unfinished} skies unfinished (run again to finish them)")
+    manifest.update(failed=failed, wall_time_s=time.perf_counter() - start,
+                    netcdf=store.netcdf_path if netcdf and not unfinished else None)
     return manifest

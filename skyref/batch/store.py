@@ -8,7 +8,9 @@
                                      SHA-256 and size, the sky's parameters, samples and timings
                                      (the only place timings are kept: EXRs and the dataset hold
                                      data alone, so a rerun writes the same bytes)
-    <directory>/dataset.zarr         every sky in one xarray dataset (axes as dimensions)
+    <directory>/dataset.zarr         every sky in one CF xarray dataset (skyref.batch.dataset)
+    <directory>/dataset.nc           its netCDF-3 copy, written once every sky is finished
+                                     (on request: ``skyref batch --netcdf``)
     <directory>/manifest.json        the markers gathered, rewritten at the end of each run
 
 A sky counts as finished only if its marker exists and its EXR has the marker's size (and,
@@ -16,7 +18,8 @@ with ``verify``, its SHA-256). EXRs and markers are written to temporary names a
 a run killed at any moment (even ``kill -9``) leaves either nothing or a complete file under
 the final name; the dataset region of a sky is written *before* its marker, so an unmarked
 sky's data is simply rewritten by the next run. Leftover temporary files are removed when a
-run starts; a lock file stops two runs from sharing a directory.
+run starts; a lock file stops two runs from sharing a directory. The dataset's layout and
+metadata are written once, when it is created.
 
 dask, xarray and zarr are imported inside the methods that use them (seconds of start-up;
 :mod:`skyref.batch` is also imported to read and check grids, which needs none of them).
@@ -34,13 +37,15 @@ import warnings
 
 import numpy as np
 
+from skyref.batch.dataset import layout, write_netcdf
 from skyref.errors import ParameterError
 from skyref.io.atomic import atomic_write
 from skyref.validation import check_output_directory
 
-__all__ = ["DATASET", "sha256_of", "BatchStore"]
+__all__ = ["DATASET", "NETCDF", "sha256_of", "BatchStore"]
 
 DATASET = "dataset.zarr"
+NETCDF = "dataset.nc"
 
 
 def sha256_of(path) -> str:
@@ -58,6 +63,7 @@ class BatchStore:
         self.grid = grid
         self.directory = os.path.abspath(grid.output.directory)
         self.dataset_path = os.path.join(self.directory, DATASET)
+        self.netcdf_path = os.path.join(self.directory, NETCDF)
 
     def exr_path(self, sky_id: str) -> str:
         return os.path.join(self.directory, "skies", f"{sky_id}.exr")
@@ -100,45 +106,23 @@ class BatchStore:
         else:
             with atomic_write(fingerprint_path) as f:
                 f.write(fingerprint)
-        for leftover in glob.glob(os.path.join(self.directory, "*", ".*.tmp*")):
+        for leftover in glob.glob(os.path.join(self.directory, ".*.tmp*")) + glob.glob(
+                os.path.join(self.directory, "*", ".*.tmp*")):
             with contextlib.suppress(FileNotFoundError):
                 os.unlink(leftover)
         if not os.path.exists(os.path.join(self.dataset_path, "zarr.json")):
             self._create_dataset(first_scene)
 
     def _create_dataset(self, scene):
-        """The dataset's layout, coordinates and metadata; the sky data stay unwritten (NaN)
-        until each sky's worker fills its chunk."""
-        import dask.array as da  # lazy: see module docstring
-        import xarray as xr
-
-        grid = self.grid
-        axes = list(grid.axes)
-        height, width = scene.camera.height, scene.camera.width
-        if grid.output.format == "spectral":
-            pixel_dims, pixel_shape = ("row", "column", "wavelength"), (height, width, len(scene.wavelengths_nm))
-            image_vars = {"radiance": "W m-2 sr-1 nm-1", "standard_error": "W m-2 sr-1 nm-1"}
-        else:
-            pixel_dims, pixel_shape = ("row", "column", "channel"), (height, width, 3)
-            image_vars = {"rgb": "linear sRGB, Y in cd m-2"}
-        shape = grid.shape
-        ones = (1,) * len(shape)
-        variables = {name: (axes + list(pixel_dims),
-                            da.full(shape + pixel_shape, np.nan, dtype=np.float32, chunks=ones + pixel_shape),
-                            {"units": unit}) for name, unit in image_vars.items()}
-        for name, dtype, unit in (("spp", np.float32, "samples per pixel"), ("relative_error_p95", np.float32, "1")):
-            variables[name] = (axes, da.full(shape, np.nan, dtype=dtype, chunks=ones), {"units": unit})
-        coords = {path: (path, grid.labels(path)) for path in grid.axes}
-        if grid.output.format == "spectral":
-            coords["wavelength"] = ("wavelength", np.asarray(scene.wavelengths_nm), {"units": "nm"})
-        else:
-            coords["channel"] = ("channel", np.array(["R", "G", "B"]))
-        dataset = xr.Dataset(variables, coords=coords,
-                             attrs={"title": "skyref reference skies", "grid": grid.fingerprint(),
-                                    "camera": json.dumps(scene.camera.to_dict())})
+        """The dataset's layout, coordinates and metadata (:func:`skyref.batch.dataset.layout`);
+        the sky data stay unwritten (NaN) until each sky's worker fills its chunk."""
         with warnings.catch_warnings():  # consolidated metadata and fixed-length strings: zarr-python
             warnings.simplefilter("ignore")  # extensions to v3, which xarray reads back
-            dataset.to_zarr(self.dataset_path, mode="w", compute=False, zarr_format=3)
+            layout(self.grid, scene).to_zarr(self.dataset_path, mode="w", compute=False, zarr_format=3)
+
+    def write_netcdf(self):
+        """Copy the dataset to ``dataset.nc`` (netCDF-3), atomically."""
+        write_netcdf(self.dataset_path, self.netcdf_path)
 
     # --- per sky ----------------------------------------------------------------------------
 

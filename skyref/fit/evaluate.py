@@ -19,6 +19,7 @@ import numpy as np
 
 from skyref.analytic.hosek import ALBEDOS, TURBIDITIES
 from skyref.audit.metrics import _statistics
+from skyref.extras import require
 
 __all__ = ["error_summary", "interpolation_gap", "model_radiance", "relative_errors", "throughput"]
 
@@ -60,6 +61,7 @@ def throughput(table, directions: int = 1 << 20, repeats: int = 3) -> dict:
     """Directions per second of ``table.radiance`` for one configuration (every channel), in
     NumPy (float64) and in JAX (jit-compiled, float32 on the default device); the best of
     ``repeats`` timed runs after a warm-up."""
+    require("fit")
     import jax  # lazy: JAX's start-up cost, paid only when its speed is measured
     import jax.numpy as jnp
 

@@ -68,6 +68,7 @@ from skyref.analytic.hosek import (ALBEDOS, CONTROL_POINTS, FORMS, TURBIDITIES, 
                                    bezier_weights, elevation_parameter, published_table)
 from skyref.validation import check_number
 from skyref.errors import ParameterError
+from skyref.extras import require
 from skyref.fit import forms
 
 __all__ = ["ATOL", "BATCH_SIZE", "GAUGE_WEIGHT", "GRID_TOLERANCE", "MAX_STEPS", "POSITIVE_EPSILON", "PRIOR_WEIGHT",
@@ -345,6 +346,7 @@ def fit_table(training, form: str = "hosek", start: CoefficientTable | None = No
     ``joint_prior_weight``: the joint refinement's pull towards the start table's control points
     (per coefficient and sky; 0: none, the least-squares fit of the data alone).
     ``progress``: optional callable ``(stage, done, total)``."""
+    require("fit")
     import jax
 
     if form not in FORMS:

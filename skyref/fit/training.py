@@ -2,7 +2,7 @@
 configuration (solar elevation, turbidity, ground albedo) of each.
 
 :func:`load_batch_dataset` reads the xarray/zarr dataset that ``skyref batch`` writes (see
-:mod:`skyref.batch.store`; dimensions: the grid's axes, then row, column, wavelength) and turns it
+:mod:`skyref.batch.dataset`; dimensions: the grid's axes, then row, column, wavelength) and turns it
 into one :class:`TrainingSet` per kind of table:
 
 - ``"spectral"``: the dataset's wavelengths that fall on the model's band centres (320, 360,
@@ -36,6 +36,7 @@ import numpy as np
 from skyref.analytic.hosek import BAND_CENTRES_NM, CHANNELS
 from skyref.errors import ParameterError
 from skyref.atmosphere import ConstantSpectrum, turbidity
+from skyref.extras import require
 from skyref.atmosphere.sun import SUN_ANGULAR_RADIUS_DEG
 from skyref.batch.grid import Grid, OutputSettings
 from skyref.projection import pixel_directions, solid_angle
@@ -169,6 +170,7 @@ def _tristimulus_matrix(wavelengths_nm, kind) -> np.ndarray:
 def load_batch_dataset(path) -> dict[str, TrainingSet]:
     """Training sets (kind -> :class:`TrainingSet`) of a spectral ``skyref batch`` dataset:
     ``path`` is its output directory or its ``dataset.zarr``. See the module's documentation."""
+    require("fit")
     import xarray as xr
 
     path = _dataset_path(path)
@@ -177,7 +179,9 @@ def load_batch_dataset(path) -> dict[str, TrainingSet]:
         raise ParameterError("grid", path, "a spectral batch dataset (output.format = 'spectral')",
                              "it holds RGB images")
     fingerprint = json.loads(dataset.attrs["grid"])
-    axes_names = dataset["radiance"].dims[:-3]              # the grid's axes, in their original order
+    # The grid's axes, in their original order: each dimension's coordinate names its axis path
+    # (datasets written before skyref.batch.dataset named dimensions by the path itself).
+    axes_names = [dataset[dim].attrs.get("skyref_axis", dim) for dim in dataset["radiance"].dims[:-3]]
     grid = Grid(base=fingerprint["base"], axes={name: fingerprint["axes"][name] for name in axes_names},
                 output=OutputSettings(directory=path, **fingerprint["output"]))
     camera = Camera.from_dict(json.loads(dataset.attrs["camera"]))

@@ -2,22 +2,29 @@
 OpenEXR Layout for Spectral Images", JCGT 10(3)), so spectral viewers and libraries that follow
 it (spectral-exr, colour's ``read_spectral_image_Fichet2021``) open them.
 
-Channels (all 32-bit FLOAT, ZIP-compressed, lossless):
+Channels, grouped in the layers of :data:`LAYERS` (by default all of them: a complete
+reference; ``layers`` picks fewer, e.g. ``("rgb",)`` for an environment map):
 
-- ``S0.<wavelength>nm``: the spectral radiance (unpolarised: Stokes component 0 only), the
-  wavelength in nm written with a comma as decimal separator and 6 decimals, e.g.
+- ``radiance``: ``S0.<wavelength>nm``, the spectral radiance (unpolarised: Stokes component 0
+  only), the wavelength in nm written with a comma as decimal separator and 6 decimals, e.g.
   ``S0.550,000000nm`` (the layout reserves ``.`` for layers);
-- ``R``, ``G``, ``B``: linear sRGB preview (:func:`skyref.color.spectral_to_linear_srgb`, scale:
-  Y in cd m^-2);
-- ``stderr.S0.<wavelength>nm``: the standard error of the radiance;
-- ``<order>.S0.<wavelength>nm`` for each scattering order of :data:`skyref.sky.ORDER_NAMES`
-  the sky has.
+- ``error``: ``stderr.S0.<wavelength>nm``, the standard error of the radiance;
+- ``orders``: ``<order>.S0.<wavelength>nm`` for each scattering order of
+  :data:`skyref.sky.ORDER_NAMES` the sky has;
+- ``rgb``: ``R``, ``G``, ``B``, the linear sRGB preview
+  (:func:`skyref.color.spectral_to_linear_srgb`, scale: Y in cd m^-2).
+
+Every channel is ZIP-compressed (lossless) 32-bit FLOAT, or with ``half`` 16-bit HALF: about
+half the bytes, 11 significant bits (relative rounding 2^-11 = 4.9e-4), values below 6.1e-5
+with less, and none above :data:`HALF_MAX`: larger values are clamped to it and reported (the
+sun's disk in the RGB preview, ~1.6e9 cd m^-2 at noon; its spectral radiance, ~3e4, fits).
 
 Header: ``spectralLayoutVersion = "1.0"`` and ``emissiveUnits = "W.m^-2.sr^-1"`` as the layout
-requires (the only emissive unit it defines; the values are spectral radiance per nm, which
-``skyref.radianceUnits = "W.m^-2.sr^-1.nm^-1"`` states explicitly), ``skyref.scene`` (the scene
-as TOML, when the sky has one) and ``skyref.metadata`` (JSON of ``sky.metadata`` but its
-timings, :data:`skyref.sky.TIMING_METADATA`: the same render gives the same bytes).
+requires, when spectral channels are written (the only emissive unit it defines; the values are
+spectral radiance per nm, which ``skyref.radianceUnits = "W.m^-2.sr^-1.nm^-1"`` states
+explicitly), ``skyref.scene`` (the scene as TOML, when the sky has one) and
+``skyref.metadata`` (JSON of ``sky.metadata`` but its timings, :data:`skyref.sky.TIMING_METADATA`:
+the same render gives the same bytes).
 
 OpenEXR and colour-science are imported inside the functions that use them: ``skyref --help``
 imports this module (through :mod:`skyref.cli`), and colour-science alone takes seconds.
@@ -46,13 +53,17 @@ from skyref.projection import pixel_directions
 from skyref.scene import Scene
 from skyref.sky import ORDER_NAMES, TIMING_METADATA, Sky
 
-__all__ = ["SPECTRAL_LAYOUT_VERSION", "EMISSIVE_UNITS", "RADIANCE_UNITS", "STDERR_LAYER", "channel_name",
-           "write_sky_exr", "read_sky_exr"]
+__all__ = ["SPECTRAL_LAYOUT_VERSION", "EMISSIVE_UNITS", "RADIANCE_UNITS", "STDERR_LAYER", "LAYERS", "HALF_MAX",
+           "channel_name", "check_layers", "write_sky_exr", "read_sky_exr"]
 
 SPECTRAL_LAYOUT_VERSION = "1.0"
 EMISSIVE_UNITS = "W.m^-2.sr^-1"
 RADIANCE_UNITS = "W.m^-2.sr^-1.nm^-1"
 STDERR_LAYER = "stderr"
+#: The layers :func:`write_sky_exr` can write (see the module docstring), in file order.
+LAYERS = ("radiance", "error", "orders", "rgb")
+#: The largest finite 16-bit half float.
+HALF_MAX = float(np.finfo(np.float16).max)
 
 #: An emissive channel of the layout: Stokes component, number (comma decimal separator,
 #: optional exponent), optional SI prefix, unit (m or Hz).
@@ -90,12 +101,36 @@ def _check_layer(name: str, array, shape) -> np.ndarray:
     return np.ascontiguousarray(array, dtype=np.float32)
 
 
-def write_sky_exr(sky: Sky, path) -> None:
-    """Write ``sky`` to ``path`` (atomically: readers never see a partial file)."""
+def check_layers(layers, name: str = "layers") -> tuple[str, ...]:
+    """``layers`` (names from :data:`LAYERS`, as a sequence or a comma-separated string) as a
+    tuple in :data:`LAYERS` order; a ParameterError naming ``name`` if none or an unknown one."""
+    valid = "a comma-separated subset of " + ", ".join(LAYERS)
+    try:
+        items = layers.split(",") if isinstance(layers, str) else list(layers)
+    except TypeError:
+        raise ParameterError(name, layers, valid, "not a string or a sequence") from None
+    items = [item.strip() if isinstance(item, str) else item for item in items]
+    items = [item for item in items if item != ""]
+    unknown = [item for item in items if item not in LAYERS]
+    if unknown:
+        raise ParameterError(name, layers, valid, f"unknown layer {', '.join(map(repr, unknown))}")
+    if not items:
+        raise ParameterError(name, layers, valid, "no layers")
+    return tuple(layer for layer in LAYERS if layer in items)
+
+
+def write_sky_exr(sky: Sky, path, layers=LAYERS, half: bool = False, report=None) -> None:
+    """Write ``sky`` to ``path`` (atomically: readers never see a partial file). ``layers``: which
+    of :data:`LAYERS` to write (default all); ``half``: store 16-bit HALF channels instead of
+    32-bit FLOAT (see the module docstring); ``report``, if given, is called with a line saying
+    how many values were clamped to :data:`HALF_MAX`."""
     import OpenEXR  # lazy: see the module docstring
 
     from skyref.color import spectral_to_linear_srgb  # lazy: see the module docstring
 
+    layers = check_layers(layers)
+    if not isinstance(half, (bool, np.bool_)):
+        raise ParameterError("half", half, "True or False", "not a bool")
     wavelengths = np.asarray(sky.wavelengths_nm, dtype=np.float64).reshape(-1)
     radiance = np.asarray(sky.radiance)
     if radiance.ndim != 3 or radiance.shape[2] != wavelengths.size:
@@ -106,24 +141,36 @@ def write_sky_exr(sky: Sky, path) -> None:
         raise ParameterError("sky.wavelengths_nm", wavelengths.tolist(), "values distinct at 1e-6 nm",
                              "duplicate wavelengths")
     shape = radiance.shape
-    layers = {"": _check_layer("sky.radiance", radiance, shape),
-              STDERR_LAYER: _check_layer("sky.standard_error", sky.standard_error, shape)}
-    for order, values in sky.orders.items():
-        if order not in ORDER_NAMES:
-            raise ParameterError("sky.orders", order, ", ".join(ORDER_NAMES), "unknown scattering order")
-        layers[order] = _check_layer(f"sky.orders[{order!r}]", values, shape)
+    radiance = _check_layer("sky.radiance", radiance, shape)
+    spectral = {"": radiance} if "radiance" in layers else {}      # channel-name prefix -> (H, W, N)
+    if "error" in layers:
+        spectral[STDERR_LAYER] = _check_layer("sky.standard_error", sky.standard_error, shape)
+    if "orders" in layers:
+        for order, values in sky.orders.items():
+            if order not in ORDER_NAMES:
+                raise ParameterError("sky.orders", order, ", ".join(ORDER_NAMES), "unknown scattering order")
+            spectral[order] = _check_layer(f"sky.orders[{order!r}]", values, shape)
 
-    rgb = spectral_to_linear_srgb(layers[""], wavelengths).astype(np.float32)
-    channels = {c: np.ascontiguousarray(rgb[..., i]) for i, c in enumerate("RGB")}
-    for layer, values in layers.items():
+    channels = {}
+    if "rgb" in layers:
+        rgb = spectral_to_linear_srgb(radiance, wavelengths).astype(np.float32)
+        channels.update((c, rgb[..., i]) for i, c in enumerate("RGB"))
+    for prefix, values in spectral.items():
         for k, wavelength in enumerate(wavelengths):
-            channels[channel_name(wavelength, layer)] = np.ascontiguousarray(values[..., k])
+            channels[channel_name(wavelength, prefix)] = values[..., k]
+    if half:
+        clamped = sum(int(np.count_nonzero(np.abs(values) > HALF_MAX)) for values in channels.values())
+        channels = {name: np.clip(values, -HALF_MAX, HALF_MAX).astype(np.float16) for name, values in channels.items()}
+        if clamped and report is not None:
+            report(f"{path}: {clamped:,} values above {HALF_MAX:g}, the largest half float, clamped to it")
+    channels = {name: np.ascontiguousarray(values) for name, values in channels.items()}
 
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage,
-              "spectralLayoutVersion": SPECTRAL_LAYOUT_VERSION, "emissiveUnits": EMISSIVE_UNITS,
-              "skyref.radianceUnits": RADIANCE_UNITS,
               "skyref.metadata": json.dumps({k: v for k, v in sky.metadata.items() if k not in TIMING_METADATA},
                                             default=numpy_default, sort_keys=True)}
+    if spectral:  # an RGB-only file does not claim the spectral layout
+        header.update({"spectralLayoutVersion": SPECTRAL_LAYOUT_VERSION, "emissiveUnits": EMISSIVE_UNITS,
+                       "skyref.radianceUnits": RADIANCE_UNITS})
     if sky.scene is not None:
         header["skyref.scene"] = tomli_w.dumps(sky.scene.to_dict())
     with atomic_path(path) as tmp, OpenEXR.File(header, channels) as exr:
@@ -133,7 +180,9 @@ def write_sky_exr(sky: Sky, path) -> None:
 def read_sky_exr(path) -> Sky:
     """Read a sky written by :func:`write_sky_exr` (or any emissive file of the layout).
 
-    Radiance, standard error and orders come back as float32 arrays. Wavelengths are in
+    The radiance layer is required (a ParameterError names what the file holds instead);
+    radiance, standard error and orders come back as float32 arrays (HALF channels widened),
+    ``orders`` with the order layers the file has (none: empty). Wavelengths are in
     ascending order, or in the scene's order when the file holds a scene with the same set.
     ``directions`` come from the scene's camera (:func:`skyref.projection.pixel_directions`),
     NaN without a scene; ``standard_error`` is NaN when the file has no ``stderr`` layer.
@@ -157,8 +206,12 @@ def read_sky_exr(path) -> Sky:
         if match and match["stokes"] == "0":
             layers.setdefault(match["layer"] or "", {})[_channel_wavelength_nm(match)] = name
     if "" not in layers:
-        raise ParameterError("path", path, "an emissive spectral OpenEXR (channels S0.<wavelength>nm)",
-                             "no spectral channels")
+        held = [layer for layer, present in (("error", STDERR_LAYER in layers),
+                                             ("orders", any(order in layers for order in ORDER_NAMES)),
+                                             ("rgb", {"R", "G", "B"} <= set(pixels))) if present]
+        raise ParameterError("path", path, "an emissive spectral OpenEXR (channels S0.<wavelength>nm: the "
+                             "radiance layer)", "no spectral channels" +
+                             (f" (it holds {', '.join(held)}: written without the radiance layer?)" if held else ""))
 
     scene = None
     if "skyref.scene" in header:

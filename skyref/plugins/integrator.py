@@ -348,29 +348,62 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
     def sample(self, scene, sampler, ray, medium=None, active=True):
         """Mitsuba's per-ray entry point, so that ``mi.render`` works in RGB variants with the
         "rgb" grid (channels 680/550/440 nm become R, G, B). skyref itself renders any
-        wavelength grid through :meth:`render_orders`."""
+        wavelength grid through :meth:`render_orders`. The scene's shapes, if any, are the
+        objects (:meth:`scene_objects`) of this render."""
         if dr.size_v(mi.Spectrum) != 3 or len(self.wavelengths_nm) != 3:
             raise RuntimeError("the atmosphere integrator renders through mi.render only in RGB "
                                "variants with wavelengths='rgb'; use skyref.render_sky otherwise")
         indices = [mi.UInt32(i) for i in range(3)]
-        orders = self.trace(sampler, ray.o, ray.d, indices, mi.Bool(active))
+        objects = self.objects
+        self.objects = self.scene_objects(scene) if scene is not None and scene.shapes() else objects
+        try:
+            orders = self.trace(sampler, ray.o, ray.d, indices, mi.Bool(active))
+        finally:
+            self.objects = objects
         total = orders[0] + orders[1] + orders[2] + orders[3]
         return mi.Spectrum(total[0], total[1], total[2]), mi.Bool(active), []
+
+    @staticmethod
+    def scene_objects(scene):
+        """``scene`` as :attr:`objects`, once each of its shapes is checked: a ``diffuse`` BSDF
+        (grey: the mean of its reflectance over the channels; both sides reflect), no area
+        emitter, no medium; in the observer's east-north-up frame, m. Anything else raises a
+        ParameterError naming the shape."""
+        for shape in scene.shapes():
+            bsdf = shape.bsdf().class_name()
+            problem = ("an area emitter" if shape.is_emitter() else
+                       "a medium" if shape.interior_medium() is not None or shape.exterior_medium() is not None else
+                       f"a {bsdf} BSDF" if bsdf != "SmoothDiffuse" else "")
+            if problem:
+                raise ParameterError(f"shape {shape.id()!r}", shape.class_name(),
+                                     "shapes with a 'diffuse' BSDF, no emitter and no medium "
+                                     "(the atmosphere integrator's objects are grey Lambertian)", f"has {problem}")
+        return scene
 
     # --- rendering ----------------------------------------------------------------------------
 
     def render_orders(self, sensor, seed: int, spp: int, pixel_centres: bool = False, batches: int = 1,
-                      progress=None) -> mi.TensorXf:
+                      progress=None, pixels=None) -> mi.TensorXf:
         """Render through a Mitsuba sensor: a tensor (H, W, 4, N) of radiance per pixel,
         scattering order (``ORDER_NAMES``) and grid wavelength, W m^-2 sr^-1 nm^-1, from ``spp``
         samples per pixel; with ``batches`` > 1, (batches, H, W, 4, N) from as many independent
         batches of ``spp`` samples, traced together. Samples cover each pixel uniformly, or look
-        along its centre only (``pixel_centres``). The samples are traced in launches of bounded
-        size (:meth:`launch_sizes`); ``progress``, if given, is called with the samples per pixel
-        and batch of each launch when it is done."""
+        along its centre only (``pixel_centres``). With ``pixels`` (flat indices row * W +
+        column), only those pixels are traced, and the tensor is (M, 4, N) (or (batches, M, 4,
+        N)) in their order. The samples are traced in launches of bounded size
+        (:meth:`launch_sizes`); ``progress``, if given, is called with the samples per pixel and
+        batch of each launch when it is done."""
         width, height = (int(x) for x in sensor.film().crop_size())
+        every_pixel = pixels is None
+        pixels = np.arange(width * height) if every_pixel else np.asarray(pixels).reshape(-1)
+        if pixels.size and not 0 <= pixels.min() <= pixels.max() < width * height:
+            raise ParameterError("pixels", f"[{pixels.min()}, {pixels.max()}]", f"indices in [0, {width * height})",
+                                 "outside the sensor's film")
+        # Gathered by target even when every pixel is traced: one kernel for both cases.
+        table = mi.UInt32(pixels.astype(np.uint32))
 
-        def camera_rays(sampler, pixel):
+        def camera_rays(sampler, target):
+            pixel = dr.gather(mi.UInt32, table, target)
             offset = mi.Vector2f(0.5) if pixel_centres else sampler.next_2d()
             position = mi.Vector2f(mi.Float(pixel % width), mi.Float(pixel // width)) + offset
             film_uv = position * mi.Vector2f(1.0 / width, 1.0 / height)
@@ -378,8 +411,8 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
                                             sample3=sampler.next_2d(), active=True)
             return ray.o, ray.d, dr.max(mi.Spectrum(weight), axis=0) > 0.0
 
-        image = self._estimate(seed, width * height, spp, batches, camera_rays, pixel_centres, progress)
-        return self._tensor(image, batches, (height, width))
+        image = self._estimate(seed, pixels.size, spp, batches, camera_rays, pixel_centres, progress)
+        return self._tensor(image, batches, (height, width) if every_pixel else (pixels.size,))
 
     def render_directions(self, directions, seed: int, spp: int, batches: int = 1) -> mi.TensorXf:
         """Radiance seen from the observer along given unit directions (array (M, 3), east-north-

@@ -1,0 +1,140 @@
+"""skyref's Mitsuba plugins are registered by importing skyref.plugins, in either import order
+and for variants set later; the libLLVM rule holds; the ``atmosphere`` integrator uses a Mitsuba
+scene's shapes or refuses them. Each registration case runs in a fresh Python process."""
+
+import os
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+BROKEN_LIBLLVM = "/usr/lib/x86_64-linux-gnu/libLLVM-15.so.1"
+
+
+def run(code: str, **env) -> subprocess.CompletedProcess:
+    """Run ``code`` in a fresh interpreter, without a DRJIT_LIBLLVM_PATH unless given."""
+    environment = {k: v for k, v in os.environ.items() if k != "DRJIT_LIBLLVM_PATH"}
+    environment.update(env)
+    return subprocess.run([sys.executable, "-c", textwrap.dedent(code)], capture_output=True, text=True,
+                          env=environment, timeout=600)
+
+
+#: Appended to the scripts below (same indentation): both kinds of plugin load.
+LOADS = """
+        assert type(mi.load_dict({"type": "atmosphere"})).__name__ == "AtmosphereIntegrator"
+        assert mi.load_dict({"type": "skyref_sky", "width": 8}).class_name() == "EnvironmentMapEmitter"
+"""
+
+
+def test_import_does_not_load_mitsuba():
+    """Importing the package keeps Mitsuba and Dr.Jit (~0.4 s) off ``skyref --help``."""
+    result = run("""
+        import sys
+        import skyref.plugins
+        assert "mitsuba" not in sys.modules and "drjit" not in sys.modules
+    """)
+    assert result.returncode == 0, result.stderr
+
+
+def test_skyref_first_then_mitsuba():
+    """``import skyref.plugins`` before Mitsuba: libLLVM is configured before Dr.Jit loads it,
+    and the plugins are there once a variant is set."""
+    result = run("""
+        import os
+        import skyref.plugins
+        import mitsuba as mi
+        assert os.environ["DRJIT_LIBLLVM_PATH"], "configure_libllvm did not run before drjit"
+        mi.set_variant("llvm_ad_rgb")
+    """ + LOADS)
+    assert result.returncode == 0, result.stderr
+
+
+def test_variant_set_before_import():
+    """Mitsuba imported and its variant set first: the plugins are missing until skyref.plugins
+    is imported, then there."""
+    result = run("""
+        import skyref._llvm
+        skyref._llvm.configure_libllvm()
+        import mitsuba as mi
+        mi.set_variant("llvm_ad_rgb")
+        try:
+            mi.load_dict({"type": "atmosphere"})
+            raise SystemExit("the atmosphere plugin exists before skyref.plugins is imported")
+        except RuntimeError:
+            pass
+        import skyref.plugins
+    """ + LOADS)
+    assert result.returncode == 0, result.stderr
+
+
+def test_variant_set_after_import():
+    """Mitsuba imported, then skyref.plugins, then variants set: each gets the plugins."""
+    result = run("""
+        import skyref._llvm
+        skyref._llvm.configure_libllvm()
+        import mitsuba as mi
+        import skyref.plugins
+        mi.set_variant("llvm_ad_spectral")
+        assert type(mi.load_dict({"type": "atmosphere_phase"})).__name__ == "AtmospherePhase"
+        mi.set_variant("llvm_ad_rgb")
+    """ + LOADS)
+    assert result.returncode == 0, result.stderr
+
+
+@pytest.mark.skipif(not os.path.exists(BROKEN_LIBLLVM), reason="no libLLVM 15 on this machine")
+def test_broken_libllvm_is_refused():
+    """Dr.Jit made to load libLLVM 15 (which crashes its kernels): registering for an LLVM
+    variant stops with a SkyrefSetupError that says what to do."""
+    result = run("""
+        import mitsuba as mi
+        mi.set_variant("llvm_ad_rgb")
+        from skyref.errors import SkyrefSetupError
+        try:
+            import skyref.plugins
+        except SkyrefSetupError as error:
+            print(error)
+        else:
+            raise SystemExit("no error")
+    """, DRJIT_LIBLLVM_PATH=BROKEN_LIBLLVM)
+    assert result.returncode == 0, result.stderr
+    assert "libLLVM 15" in result.stdout and "DRJIT_LIBLLVM_PATH=" in result.stdout
+    assert "apt-get install libllvm19" in result.stdout
+
+
+# --- shapes in a scene rendered with mi.render ------------------------------------------------
+
+def _view_through(mi, shape=None):
+    """Mean RGB of a 4x4 render looking north, 20 deg up, through a 1 deg field of view, with
+    ``shape`` (a 1 m sphere 20 m away on that line) in the scene."""
+    d = np.array([0.0, np.cos(np.radians(20.0)), np.sin(np.radians(20.0))])
+    scene = {"type": "scene", "integrator": {"type": "atmosphere"},
+             "sensor": {"type": "perspective", "fov": 1.0,
+                        "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 0], target=list(d), up=[0, 0, 1]),
+                        "film": {"type": "hdrfilm", "width": 4, "height": 4},
+                        "sampler": {"type": "independent", "sample_count": 16}}}
+    if shape is not None:
+        scene["ball"] = {"type": "sphere", "center": list(20.0 * d), "radius": 1.0, **shape}
+    return np.array(mi.render(mi.load_dict(scene))).mean(axis=(0, 1))
+
+
+def test_scene_shapes_are_objects(mi):
+    """A black diffuse sphere filling the view leaves only the light scattered in the 19 m of
+    air before it: under 0.1% of the sky behind it (the air's optical depth over 19 m is
+    ~2e-4 at 440 nm)."""
+    sky = _view_through(mi)
+    black = _view_through(mi, {"bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}}})
+    assert np.all(sky > 0.01)
+    assert np.all(black < 1e-3 * sky), black / sky
+
+
+@pytest.mark.parametrize("shape, problem", [
+    ({"bsdf": {"type": "conductor"}}, "shape 'ball' = 'Sphere': has a SmoothConductor BSDF"),
+    ({"emitter": {"type": "area"}}, "shape 'ball' = 'Sphere': has an area emitter"),
+    ({"interior": {"type": "homogeneous"}}, "shape 'ball' = 'Sphere': has a medium"),
+])
+def test_unsupported_shapes_are_refused(mi, shape, problem):
+    with pytest.raises(RuntimeError) as error:
+        _view_through(mi, shape)
+    assert problem in str(error.value.__cause__)
