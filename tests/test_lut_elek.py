@@ -279,6 +279,25 @@ def test_half_table_keeps_the_sky_half(mi):
     assert np.allclose(half.radiance(views, sun, 500.0), whole.radiance(views, sun, 500.0), rtol=1e-12)
 
 
+@pytest.mark.parametrize("sun_zenith", [150.0, 180.0])
+def test_no_light_at_midnight(mi, sun_zenith):
+    """A sun below the tables' lowest row (11.4 deg below the horizon) gives no light, as the
+    path tracer finds (the whole atmosphere in view is in the planet's shadow); small tables
+    clamped to that row lit the sky at 1e-4 of the noon mean. From space, the sunlit limb
+    beyond the night side stays lit."""
+    m = method(scattering_size=(8, 16, 8), scattering_orders=2)
+    views = directions([0.0, 45.0, 80.0, 89.0, 95.0], [0.0, 90.0, 180.0, 0.0, 0.0])
+    sun = directions(sun_zenith, 0.0)
+    for altitude in (0.0, 10_000.0):
+        assert np.all(m.radiance(views, sun, altitude) == 0.0)
+        truth, _ = ground_truth(mi, atmosphere(), sun_zenith, altitude, views, max_depth=3)
+        assert np.all(truth == 0.0)
+    # 1000 km up, the sun 120 deg from the zenith: rays towards the sun between the top of the
+    # atmosphere's limb (view zenith 119.3 deg) and the ground's (120.2 deg) cross it where it is lit
+    limb = directions([119.6, 119.9], [0.0, 0.0])
+    assert np.all(m.radiance(limb, directions(120.0, 0.0), 1.0e6) > 0.0)
+
+
 def test_float16_tables_agree_with_float32(mi):
     views = directions([0.0, 45.0, 85.0, 120.0], [0.0, 90.0, 180.0, 0.0])
     sun = directions(50.0, 0.0)

@@ -56,7 +56,8 @@ the view axis, so the table reaches the ground, the top, the zenith and the hori
   concentrates cells at the horizon, where in-scattering changes fastest.
 - sun zenith (Bruneton 2008's "better formula", used by Yusov and the thesis):
   x_s = 0.5 (atan(max(mu_s, -0.1975) tan(1.26 * 1.1)) / 1.1 + (1 - 0.26)); the table spans
-  mu_s from -0.198 (sun 11.4 deg below the horizon) to 1, lower suns are clamped.
+  mu_s from -0.198 (sun 11.4 deg below the horizon) to 1; inside the tables lower suns are
+  clamped, and a view whose sun is lower than that gets no light (not the clamped row's).
 
 The half table (this implementation's reading of Bodare–Sandberg). Once the gathering is done,
 only the upper half of the view axis (rays that reach the top of the atmosphere: the sky) is
@@ -429,7 +430,13 @@ class Elek2009(LutMethod):
                                self.scattering_mie.lookup(ground_coords))]
             transmittance = self.transmittance.between(r0, mu0, ground_distance, mi.Bool(True))
         ground = [a + t * g for a, t, g in zip(inscattered, transmittance, reflected)]
-        return [dr.select(enters, float(e) * dr.select(hits, g, s), 0.0)
+        # The tables end at mu_s = SUN_MU_MIN (the sun 11.4 deg below the horizon where the ray
+        # starts): a lower sun would read their last row, clamped, and light the sky at midnight as
+        # at 101.4 deg. It gives no light. The true sky is dark there too but for a faint arch over
+        # the sun's horizon (the path tracer, Bruneton 2017 atmosphere, ground: at most 2e-4 of
+        # the noon mean at sun zenith 102 deg, 2e-5 at 104, < 1e-6 from 106 on).
+        lit = enters & (mu_s0 >= SUN_MU_MIN)
+        return [dr.select(lit, float(e) * dr.select(hits, g, s), 0.0)
                 for e, g, s in zip(self.solar_irradiance, ground, sky)]
 
     def _prepare_view(self, r: float, mu_s: float):
