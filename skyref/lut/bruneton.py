@@ -47,8 +47,11 @@ sun's transmittance at every point); then for each order n = 2 .. K (K = ``scatt
    50 intervals), added to the scattering table divided by the Rayleigh phase function of the
    cell's nu.
 
-Every table cell is computed in one Dr.Jit lane per (cell, wavelength channel), in double
-precision (the scattering density: one lane per cell); the integrals are flat symbolic loops.
+The scattering stages (single scattering, density, order n radiance) run one Dr.Jit lane per
+cell with the wavelength channels in lists, so that the geometry, the table coordinates and the
+phase functions are paid once for all wavelengths; the irradiance stages and the incident field
+of the density run one lane per (cell, channel). Double precision; the integrals are flat
+symbolic loops.
 Table storage precision (float32 or float16) applies to the 3D scattering tables, as in
 Bruneton's code; transmittance and irradiance are always float32 there and here.
 
@@ -103,7 +106,7 @@ from skyref.validation import check_choice, check_int, check_number
 from skyref.errors import ParameterError
 from skyref.lut import planet
 from skyref.lut.base import LutMethod
-from skyref.lut.table import PRECISIONS, Table, texture_coordinate, unit_range
+from skyref.lut.table import PRECISIONS, Table, channel_values, texture_coordinate, unit_range
 from skyref.lut.transmittance import TransmittanceTable
 from skyref.atmosphere.sun import SUN_ANGULAR_RADIUS_DEG
 
@@ -270,17 +273,13 @@ class Bruneton2017(LutMethod):
 
     # --- table cells as lanes ------------------------------------------------------------------
 
-    def _scattering_cells(self, per_channel: bool = True):
-        """(r, mu, mu_s, nu, ray_hits_ground, channel) of every (scattering cell, channel) lane,
-        cells in the 3D texture's order [r][mu][nu * mu_s_size + mu_s]; without ``per_channel``,
-        one lane per cell (channel None). nu sits on grid points i / (nu_size - 1) and is clamped
-        to the range that mu and mu_s allow (nu is not independent of them: the view and the sun
-        are both unit vectors)."""
+    def _scattering_cells(self):
+        """(r, mu, mu_s, nu, ray_hits_ground) of every scattering cell, one lane each, in the 3D
+        texture's order [r][mu][nu * mu_s_size + mu_s]. nu sits on grid points i / (nu_size - 1)
+        and is clamped to the range that mu and mu_s allow (nu is not independent of them: the
+        view and the sun are both unit vectors)."""
         width = self.nu_size * self.mu_s_size
-        channels = self.channels if per_channel else 1
-        lane = dr.arange(mi.UInt32, self.r_size * self.mu_size * width * channels)
-        channel = lane % channels if per_channel else None
-        cell = lane // channels
+        cell = dr.arange(mi.UInt32, self.r_size * self.mu_size * width)
         x = cell % width
         i_mu = (cell // width) % self.mu_size
         i_r = cell // (width * self.mu_size)
@@ -291,7 +290,7 @@ class Bruneton2017(LutMethod):
         r, mu, mu_s, nu, ray_hits_ground = self.scattering_parameters(u_nu, u_mu_s, u_mu, u_r)
         spread = dr.safe_sqrt((1.0 - mu * mu) * (1.0 - mu_s * mu_s))
         nu = dr.clip(nu, mu * mu_s - spread, mu * mu_s + spread)
-        return r, mu, mu_s, nu, ray_hits_ground, channel
+        return r, mu, mu_s, nu, ray_hits_ground
 
     def _irradiance_cells(self):
         """(r, mu_s, channel) of every (irradiance cell, channel) lane, cells [r][mu_s]."""
@@ -303,9 +302,10 @@ class Bruneton2017(LutMethod):
         r, mu_s = self.irradiance_parameters(u_mu_s, u_r)
         return r, mu_s, channel
 
-    def _scattering_table(self, lanes) -> Table:
-        return Table.from_lanes(lanes, (self.r_size, self.mu_size, self.nu_size * self.mu_s_size),
-                                self.channels, self.precision)
+    def _scattering_table(self, per_channel, scale: float = 1.0) -> Table:
+        """A scattering table from one Dr.Jit array per channel (one lane per cell), times ``scale``."""
+        return Table.from_channels(per_channel, (self.r_size, self.mu_size, self.nu_size * self.mu_s_size),
+                                   self.precision, scale)
 
     def _irradiance_table(self, values) -> Table:
         return Table(values, (self.irradiance_height, self.irradiance_width), self.channels, "float32")
@@ -341,33 +341,31 @@ class Bruneton2017(LutMethod):
         sky_irradiance = np.zeros(self.irradiance_width * self.irradiance_height * self.channels)
         self._stage_done("transmittance and direct irradiance")
 
-        r, mu, mu_s, nu, hits, channel = self._scattering_cells()
-        cell_r, cell_mu, cell_mu_s, cell_nu, _, _ = self._scattering_cells(per_channel=False)
-        rayleigh, mie = self._single_scattering(r, mu, mu_s, nu, hits, channel)
-        dr.eval(rayleigh, mie)
+        r, mu, mu_s, nu, hits = self._scattering_cells()
+        rayleigh, mie = self._single_scattering(r, mu, mu_s, nu, hits)
+        dr.eval(rayleigh, mie)                     # one kernel for every channel
         single_rayleigh = self._scattering_table(rayleigh)
         single_mie = self._scattering_table(mie)
-        scattering = rayleigh.numpy()
-        single_mie_values = mie.numpy()
+        scattering = channel_values(rayleigh).reshape(-1)
+        single_mie_values = channel_values(mie).reshape(-1)
         self._stage_done("single scattering")
 
         previous_order = self._single_order(single_rayleigh, single_mie)
         rayleigh_phase = optics.rayleigh_phase(nu)
         for order in range(2, self.scattering_orders + 1):
             incident = self._incident_radiance(previous_order, ground_irradiance)
-            density = self._scattering_density(cell_r, cell_mu, cell_mu_s, cell_nu, incident)
+            density = self._scattering_density(r, mu, mu_s, nu, incident)
             dr.eval(density)                       # one kernel for every channel
-            density = Table(np.stack([x.numpy() for x in density], axis=-1) * METRES_PER_KM,
-                            (self.r_size, self.mu_size, self.nu_size * self.mu_s_size), self.channels,
-                            self.precision)
+            density = self._scattering_table(density, METRES_PER_KM)
             self._stage_done(f"order {order}: scattering density")
             delta = self._indirect_irradiance(r_e, mu_s_e, channel_e, previous_order).numpy()
             sky_irradiance += delta
             ground_irradiance = self._irradiance_table(delta)
-            radiance = self._multiple_scattering(r, mu, mu_s, nu, hits, channel, density)
+            radiance = self._multiple_scattering(r, mu, mu_s, nu, hits, density)
+            dr.eval(radiance)                      # one kernel for every channel
             previous_order = self._multiple_order(self._scattering_table(radiance))
             # Stored divided by the Rayleigh phase function, multiplied back at lookup.
-            scattering += (radiance / rayleigh_phase).numpy()
+            scattering += channel_values([x / rayleigh_phase for x in radiance]).reshape(-1)
             self._stage_done(f"order {order}: irradiance and radiance")
 
         shape = (self.r_size, self.mu_size, self.nu_size * self.mu_s_size)
@@ -414,29 +412,35 @@ class Bruneton2017(LutMethod):
         return self._solar_irradiance(channel) * self.transmittance.to_top(r, mu_s, channel) * cosine_factor
 
     @dr.syntax
-    def _single_scattering(self, r, mu, mu_s, nu, ray_hits_ground, channel):
+    def _single_scattering(self, r, mu, mu_s, nu, ray_hits_ground):
         """Single Rayleigh and Mie scattering without phase functions, W m^-2 nm^-1: along the
         ray to the nearest boundary, E T(sun -> q) sigma_s(q) T(q -> p) integrated over the
         scattering point q at distance d, with r_d = |q| and the sun's cosine there
-        mu_s,d = (r mu_s + d nu) / r_d (trapezoidal rule, ComputeSingleScattering)."""
+        mu_s,d = (r mu_s + d nu) / r_d (trapezoidal rule, ComputeSingleScattering). One lane per
+        scattering cell, its channels in lists: the ray's geometry is paid once for all
+        wavelengths. Returns (Rayleigh, Mie), a list of arrays each, one per channel."""
         n = self.integration_samples
+        channels = range(self.channels)
         dx = planet.distance_to_nearest_boundary(r, mu, self.bottom_radius, self.top_radius, ray_hits_ground) / n
-        rayleigh, mie = mi.Float64(0.0), mi.Float64(0.0)
+        at_start = self.transmittance.ray_start(r, mu, ray_hits_ground)
+        rayleigh = [mi.Float64(0.0) for _ in channels]
+        mie = [mi.Float64(0.0) for _ in channels]
         i = mi.UInt32(0)
         while i <= n:
             d = mi.Float64(i) * dx
             r_d, _ = planet.point_along_ray(r, mu, d)
             r_d = dr.clip(r_d, self.bottom_radius, self.top_radius)
             mu_s_d = dr.clip((r * mu_s + d * nu) / r_d, -1.0, 1.0)
-            transmittance = (self.transmittance.between(r, mu, d, ray_hits_ground, channel)
-                             * self.transmittance.to_sun(r_d, mu_s_d, self.sun_angular_radius, channel))
-            sigma_rayleigh, sigma_mie = self.optics.scattering(r_d - self.bottom_radius, channel)
-            weight = dr.select((i == 0) | (i == n), 0.5, 1.0) * transmittance
-            rayleigh += weight * sigma_rayleigh
-            mie += weight * sigma_mie
+            to_point = self.transmittance.between_from(at_start, r, mu, d, ray_hits_ground)
+            to_sun = self.transmittance.to_sun(r_d, mu_s_d, self.sun_angular_radius)
+            sigma_rayleigh, sigma_mie = self.optics.scattering_by_channel(r_d - self.bottom_radius, self.channels)
+            end_point = dr.select((i == 0) | (i == n), 0.5, 1.0)
+            weight = [end_point * (to_point[k] * to_sun[k]) for k in channels]
+            rayleigh = [rayleigh[k] + weight[k] * sigma_rayleigh[k] for k in channels]
+            mie = [mie[k] + weight[k] * sigma_mie[k] for k in channels]
             i += 1
-        solar = self._solar_irradiance(channel) * dx
-        return rayleigh * solar, mie * solar
+        solar = [float(self.solar_irradiance[k]) * dx for k in channels]
+        return [rayleigh[k] * solar[k] for k in channels], [mie[k] * solar[k] for k in channels]
 
     def _density_directions(self, index):
         """Direction ``index`` (UInt32 < 2 n^2) of the scattering-density quadrature, n =
@@ -538,13 +542,15 @@ class Bruneton2017(LutMethod):
         return total
 
     @dr.syntax
-    def _multiple_scattering(self, r, mu, mu_s, nu, ray_hits_ground, channel, density: Table):
+    def _multiple_scattering(self, r, mu, mu_s, nu, ray_hits_ground, density: Table):
         """Order n radiance, W m^-2 sr^-1 nm^-1: the density J_n (``density``, stored per km) at
         the points q of the ray to the nearest boundary times T(p -> q), trapezoidal rule
-        (ComputeMultipleScattering)."""
+        (ComputeMultipleScattering). One lane per scattering cell, its channels in a list."""
         n = self.integration_samples
+        channels = range(self.channels)
         dx = planet.distance_to_nearest_boundary(r, mu, self.bottom_radius, self.top_radius, ray_hits_ground) / n
-        total = mi.Float64(0.0)
+        at_start = self.transmittance.ray_start(r, mu, ray_hits_ground)
+        total = [mi.Float64(0.0) for _ in channels]
         i = mi.UInt32(0)
         while i <= n:
             d = mi.Float64(i) * dx
@@ -552,11 +558,12 @@ class Bruneton2017(LutMethod):
             r_d = dr.clip(r_d, self.bottom_radius, self.top_radius)
             mu_s_d = dr.clip((r * mu_s + d * nu) / r_d, -1.0, 1.0)
             coordinates = self.scattering_coordinates(r_d, mu_d, mu_s_d, nu, ray_hits_ground)
-            value = (self._lookup(density, coordinates, channel)
-                     * self.transmittance.between(r, mu, d, ray_hits_ground, channel))
-            total += dr.select((i == 0) | (i == n), 0.5, 1.0) * value
+            source = self._lookup(density, coordinates)
+            transmittance = self.transmittance.between_from(at_start, r, mu, d, ray_hits_ground)
+            end_point = dr.select((i == 0) | (i == n), 0.5, 1.0)
+            total = [total[k] + end_point * (source[k] * transmittance[k]) for k in channels]
             i += 1
-        return total * (dx / METRES_PER_KM)
+        return [t * (dx / METRES_PER_KM) for t in total]
 
     # --- lookups (rendering) -------------------------------------------------------------------
 

@@ -18,7 +18,7 @@ import numpy as np
 
 from skyref.validation import check_choice
 
-__all__ = ["PRECISIONS", "texture_coordinate", "unit_range", "cell_centres", "Table"]
+__all__ = ["PRECISIONS", "texture_coordinate", "unit_range", "cell_centres", "channel_values", "Table"]
 
 PRECISIONS = ("float32", "float16")
 
@@ -39,6 +39,11 @@ def cell_centres(size: int) -> np.ndarray:
     return (np.arange(size) + 0.5) / size
 
 
+def channel_values(per_channel) -> np.ndarray:
+    """One Dr.Jit array per channel (one lane per cell) as a NumPy array (cells, channels)."""
+    return np.stack([np.asarray(x.numpy(), dtype=np.float64) for x in per_channel], axis=-1)
+
+
 class Table:
     """A ``shape`` x ``channels`` table of float values (see module docstring)."""
 
@@ -57,6 +62,11 @@ class Table:
     def from_lanes(cls, lanes, shape: tuple, channels: int, precision: str = "float32") -> "Table":
         """A table from a Dr.Jit array with one lane per (cell, channel), channel fastest."""
         return cls(lanes.numpy(), shape, channels, precision)
+
+    @classmethod
+    def from_channels(cls, per_channel, shape: tuple, precision: str = "float32", scale: float = 1.0) -> "Table":
+        """A table from one Dr.Jit array per channel with one lane per cell, times ``scale``."""
+        return cls(channel_values(per_channel) * scale, shape, len(per_channel), precision)
 
     def numpy(self) -> np.ndarray:
         """The stored values as an array of shape ``shape + (channels,)``."""

@@ -106,10 +106,18 @@ class TransmittanceTable:
         """T between (r, mu) and the point at distance ``d`` along the ray: T(r, mu) / T(r_d, mu_d)
         for rays that stay above the ground; for rays that hit it, the same ratio for the
         reversed ray, T(r_d, -mu_d) / T(r, -mu), whose path to the top is clear."""
+        return self.between_from(self.ray_start(r, mu, ray_hits_ground, channel), r, mu, d, ray_hits_ground, channel)
+
+    def ray_start(self, r, mu, ray_hits_ground, channel=None):
+        """The start's table value in :meth:`between` (T(r, mu), or T(r, -mu) for a ray that hits
+        the ground): one lookup for every point of a ray march (:meth:`between_from`)."""
+        return self.to_top(r, dr.select(ray_hits_ground, -mu, mu), channel)
+
+    def between_from(self, at_start, r, mu, d, ray_hits_ground, channel=None):
+        """:meth:`between` with the start's value ``at_start`` from :meth:`ray_start`."""
         r_d, mu_d = planet.point_along_ray(r, mu, d)
         r_d = dr.clip(r_d, self.optics.bottom_radius, self.optics.top_radius)
         sign = dr.select(ray_hits_ground, -1.0, 1.0)
-        at_start = self.to_top(r, sign * mu, channel)
         at_end = self.to_top(r_d, sign * mu_d, channel)
 
         def ratio(start, end):
