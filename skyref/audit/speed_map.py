@@ -37,7 +37,7 @@ from skyref.analytic.hosek import TURBIDITIES
 from skyref.atmosphere import turbidity
 from skyref.batch.store import sha256_of
 from skyref.errors import ParameterError
-from skyref.fit.export import read_tables
+from skyref.fit.export import read_spectral_table
 from skyref.io.atomic import atomic_path
 from skyref.io.exr import read_sky_exr
 from skyref.lut import lut_method
@@ -137,20 +137,13 @@ def _clamped_turbidity(name: str, atmosphere) -> float:
     return float(np.clip(turbidity(atmosphere), lo, hi))
 
 
-def _spectral_table(path: str):
-    tables, _ = read_tables(path)
-    if "spectral" not in tables:
-        raise ParameterError("table", path, "a coefficient file with a spectral table", "no spectral table")
-    return tables["spectral"]
-
-
 def build_method(entry: Entry, atmosphere, wavelengths_nm):
     """The method of ``entry`` (LUT or analytic) for ``atmosphere``, not yet precomputed."""
     options = dict(entry.options)
     if options.get("turbidity") == "clamp":
         options["turbidity"] = _clamped_turbidity(entry.method, atmosphere)
     if "table" in options:
-        options["table"] = _spectral_table(options["table"])
+        options["table"] = read_spectral_table(options["table"], "table")
     if entry.family == "LUT":
         return lut_method(entry.method, atmosphere, wavelengths_nm, **options)
     return analytic_model(entry.method, atmosphere, wavelengths_nm, **options)

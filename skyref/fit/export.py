@@ -41,7 +41,7 @@ from skyref.analytic.hosek import (ALBEDOS, CHANNELS, FORMS, TURBIDITIES, UNITS,
 from skyref.errors import ParameterError
 from skyref.io.atomic import atomic_path, atomic_write
 
-__all__ = ["HEADER_NAMES", "POINTER_ARRAYS", "c_header", "default_metadata", "read_tables", "write_c_headers",
+__all__ = ["HEADER_NAMES", "POINTER_ARRAYS", "c_header", "default_metadata", "read_spectral_table", "read_tables", "write_c_headers",
            "write_json", "write_npz", "write_tables"]
 
 #: Published header file name of each kind of table.
@@ -199,6 +199,15 @@ def write_tables(tables: dict, directory, name: str, metadata: dict | None = Non
     if form == "hosek":
         paths += write_c_headers(tables, directory, notes)
     return paths
+
+
+def read_spectral_table(path, parameter: str = "coefficients"):
+    """The spectral :class:`CoefficientTable` of a coefficient file (:func:`read_tables`), or a
+    ParameterError naming ``parameter`` if the file has none."""
+    tables, _ = read_tables(path)
+    if "spectral" not in tables:
+        raise ParameterError(parameter, os.fspath(path), "a coefficient file with a spectral table", "no spectral table")
+    return tables["spectral"]
 
 
 def read_tables(path) -> tuple[dict, dict]:

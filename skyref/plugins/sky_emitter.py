@@ -44,7 +44,7 @@ import numpy as np
 
 from skyref.analytic import MODELS, analytic_model
 from skyref.errors import ParameterError
-from skyref.fit.export import read_tables
+from skyref.fit.export import read_spectral_table
 from skyref.lut import METHODS, lut_method
 from skyref.plugins.optics import atmosphere_from_property
 from skyref.renderer_frames import WORLD_FROM_ENU, latlong_directions
@@ -70,11 +70,7 @@ def sky_method(name: str, atmosphere, coefficients: str = "", turbidity: float |
         if name != "hosek2012":
             raise ParameterError("coefficients", coefficients, "a file only with method 'hosek2012'",
                                  f"{name} has no coefficient table")
-        tables, _ = read_tables(coefficients)
-        if "spectral" not in tables:
-            raise ParameterError("coefficients", coefficients, "a coefficient file with a spectral table",
-                                 "no spectral table")
-        options["table"] = tables["spectral"]
+        options["table"] = read_spectral_table(coefficients)
     if name in METHODS:
         method = lut_method(name, atmosphere, "rgb", variant=mi.variant(), **options)
     else:
