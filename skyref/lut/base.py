@@ -93,10 +93,20 @@ class LutOptics:
 
     def extinction(self, altitude, channel):
         """Total extinction coefficient at ``altitude`` (m) for the lanes' ``channel``, m^-1."""
+        return self._extinction([c.density(altitude) for c in self.optics.components], channel)
+
+    def extinction_by_channel(self, altitude, channels: int):
+        """Total extinction coefficients at ``altitude`` (m) for channels 0 .. ``channels`` - 1: a
+        list of Float64, m^-1, the densities evaluated once."""
+        densities = [c.density(altitude) for c in self.optics.components]
+        return [self._extinction(densities, mi.UInt32(k)) for k in range(channels)]
+
+    def _extinction(self, densities, channel):
+        """Total extinction coefficient, m^-1, for ``channel`` at the relative ``densities`` of
+        the optics' components."""
         total = mi.Float64(0.0)
-        for c in self.optics.components:
+        for c, rho in zip(self.optics.components, densities):
             s, a = c.coefficients(channel)
-            rho = c.density(altitude)
             if s is not None:
                 total += mi.Float64(s) * rho
             if a is not None:

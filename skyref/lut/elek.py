@@ -480,19 +480,18 @@ class AerialPerspectiveVolume:
         self.mu_horizon = _opaque(-math.sqrt(max(r * r - R * R, 0.0)) / r)
         # The longest in-atmosphere path to the ground: along the horizon ray.
         self.depth = _opaque(max(math.sqrt(max(min(r, Rt) ** 2 - R * R, 0.0)), 1.0))
+        # One lane per cell, the channels in lists: the ray's geometry is paid once for all of them.
         n_mu, n_phi, n_d = method.aerial_perspective_size
-        channels = method.channels
-        lane = dr.arange(mi.UInt32, n_mu * n_phi * n_d * channels)
-        channel = lane % channels
-        cell = lane // channels
+        cell = dr.arange(mi.UInt32, n_mu * n_phi * n_d)
         i_d, i_phi, i_mu = cell % n_d, (cell // n_d) % n_phi, cell // (n_d * n_phi)
         mu = dr.clip(mu_from_view_unit(mi.Float64(i_mu) / (n_mu - 1), self.mu_horizon, mi.Bool(True)), -1.0, 1.0)
         nu = self._nu(mu, mi.Float64(i_phi) * (math.pi / (n_phi - 1)))
         depth = self.depth * dr.square(mi.Float64(i_d) / (n_d - 1))
-        inscattered, transmittance = self._integrate(mu, nu, depth, channel)
+        inscattered, transmittance = self._integrate(mu, nu, depth)
+        dr.eval(inscattered, transmittance)         # one kernel for every channel
         shape = (n_mu, n_phi, n_d)
-        self.inscattered = Table.from_lanes(inscattered, shape, channels, method.precision)
-        self.transmittance = Table.from_lanes(transmittance, shape, channels, method.precision)
+        self.inscattered = Table.from_channels(inscattered, shape, method.precision)
+        self.transmittance = Table.from_channels(transmittance, shape, method.precision)
 
     def _nu(self, mu, phi):
         """Cosine of the view–sun angle of a view with zenith cosine mu at azimuth phi from the sun."""
@@ -506,11 +505,13 @@ class AerialPerspectiveVolume:
         return dr.maximum(-self.r * mu - dr.safe_sqrt(self.r * self.r * (mu * mu - 1.0) + Rt * Rt), 0.0)
 
     @dr.syntax
-    def _integrate(self, mu, nu, depth, channel):
+    def _integrate(self, mu, nu, depth):
         """In-scattered radiance (phase applied) per unit solar irradiance, and transmittance,
-        from the atmosphere entry to ``depth`` beyond it (stopping at the ground)."""
+        from the atmosphere entry to ``depth`` beyond it (stopping at the ground): two lists of
+        Float64, one per channel."""
         method, optics = self.method, self.method.optics
         n = method.integration_samples
+        channels = range(method.channels)
         r = self.r
         start = self._entry(mu)
         ground = planet.distance_to_bottom(r, mu, optics.bottom_radius)
@@ -519,30 +520,33 @@ class AerialPerspectiveVolume:
         phase_rayleigh, phase_mie = method._rendering_phases(nu)
 
         def light(r_y, mu_s_y):
-            """Sunlight plus the gathered light of all orders (per unit solar irradiance)."""
-            sun = method.transmittance.to_sun(r_y, mu_s_y, method.sun_angular_radius, channel)
+            """Sunlight plus the gathered light of all orders (per unit solar irradiance), per channel."""
+            sun = method.transmittance.to_sun(r_y, mu_s_y, method.sun_angular_radius)
             if method.scattering_orders == 1:
                 return sun
-            return sun + method.gathering.lookup(method._gathering_coordinates(r_y, mu_s_y), channel)
+            gathered = method.gathering.lookup(method._gathering_coordinates(r_y, mu_s_y))
+            return [sun[k] + gathered[k] for k in channels]
 
-        inscattered = mi.Float64(0.0)
-        optical_depth = mi.Float64(0.0)
-        previous_extinction = mi.Float64(0.0)
+        inscattered = [mi.Float64(0.0) for _ in channels]
+        optical_depth = [mi.Float64(0.0) for _ in channels]
+        previous_extinction = [mi.Float64(0.0) for _ in channels]
         i = mi.UInt32(0)
         while i <= n:
             t = start + mi.Float64(i) * dt
             r_y, _ = planet.point_along_ray(r, mu, t)
             altitude = dr.clip(r_y - optics.bottom_radius, 0.0, method.atmosphere_height)
             mu_s_y = dr.clip((r * self.mu_s + t * nu) / r_y, -1.0, 1.0)
-            extinction = optics.extinction(altitude, channel)
-            optical_depth += dr.select(i > 0, 0.5 * dt * (previous_extinction + extinction), 0.0)
+            extinction = optics.extinction_by_channel(altitude, method.channels)
+            optical_depth = [optical_depth[k] + dr.select(i > 0, 0.5 * dt * (previous_extinction[k] + extinction[k]),
+                                                          0.0) for k in channels]
             previous_extinction = extinction
-            beta_rayleigh, beta_mie = optics.scattering(altitude, channel)
+            beta_rayleigh, beta_mie = optics.scattering_by_channel(altitude, method.channels)
             weight = dr.select((i == 0) | (i == n), 1.0, dr.select(i % 2 == 1, 4.0, 2.0))
-            inscattered += (weight * (phase_rayleigh * beta_rayleigh + phase_mie * beta_mie)
-                            * dr.exp(-optical_depth) * light(r_y, mu_s_y))
+            reaching = light(r_y, mu_s_y)
+            inscattered = [inscattered[k] + (weight * (phase_rayleigh * beta_rayleigh[k] + phase_mie * beta_mie[k])
+                                             * dr.exp(-optical_depth[k]) * reaching[k]) for k in channels]
             i += 1
-        return inscattered * dt / 3.0, dr.exp(-optical_depth)
+        return [inscattered[k] * dt / 3.0 for k in channels], [dr.exp(-optical_depth[k]) for k in channels]
 
     def lookup(self, mu, nu, distance):
         """(in-scattered radiance, transmittance) per channel (lists of Float64) from the observer
