@@ -507,10 +507,15 @@ class Bruneton2017(LutMethod):
         width = self.nu_size * self.mu_s_size
         row = (cell // (width * self.mu_size)) * self.mu_s_size + cell % self.mu_s_size
         start = row * (directions * self.channels)
+        # the quadrature's directions, computed once and read by every cell
+        direction_x, direction_y, direction_z, _ = self._density_directions(dr.arange(mi.UInt32, directions))
+        dr.eval(direction_x, direction_y, direction_z)
         total = [mi.Float64(0.0) for _ in channels]
         i = mi.UInt32(0)
         while i < directions:
-            wx, wy, wz, _ = self._density_directions(i)
+            wx = dr.gather(mi.Float64, direction_x, i)
+            wy = dr.gather(mi.Float64, direction_y, i)
+            wz = dr.gather(mi.Float64, direction_z, i)
             cos_scatter = omega_x * wx + omega_y * wy + mu * wz
             phase_rayleigh = self.optics.rayleigh_phase(cos_scatter)
             phase_mie = self.optics.mie_phase(cos_scatter)
