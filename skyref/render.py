@@ -131,6 +131,12 @@ class _PixelRenderer:
             pixel_centres=self.scene.render.pixel_sampling == "centre", pixels=pixels).numpy()
         return per_pass.reshape(passes, len(pixels), len(ORDER_NAMES), -1)
 
+    @staticmethod
+    def statistics(per_pass: np.ndarray) -> tuple:
+        """The mean per order (M, orders, N) of :meth:`passes`' output and the standard error
+        of the radiance (M, N): the spread of the pass means / sqrt(passes)."""
+        return per_pass.mean(axis=0), per_pass.sum(axis=2).std(axis=0, ddof=1) / math.sqrt(per_pass.shape[0])
+
     def metadata(self, spp: int, passes: int, seed, elapsed: float, samples: int) -> dict:
         return {"skyref_version": __version__, "integrator": "atmosphere", "variant": self.mi.variant(),
                 "geometry": self.geometry, "estimator": self.integrator.estimator, "spp": spp, "passes": passes,
@@ -187,11 +193,10 @@ def render_sky(scene, spp: int | None = None, passes: int | None = None, seed: i
     if bar is not None:
         bar.close()
 
-    radiance_passes = per_pass.sum(axis=2)             # (P, M, N)
-    standard_error = radiance_passes.std(axis=0, ddof=1) / math.sqrt(settings.passes)
+    orders, standard_error = renderer.statistics(per_pass)
     spp_total = spp_per_pass * settings.passes
     metadata = renderer.metadata(spp_total, settings.passes, settings.seed, elapsed, pixels.size * spp_total)
-    return _sky(scene, pixels, radiance_passes.mean(axis=0), standard_error, per_pass.mean(axis=0), metadata)
+    return _sky(scene, pixels, orders.sum(axis=1), standard_error, orders, metadata)
 
 
 def relative_error_percentile(sky: Sky, percentile: float = 95.0) -> float:
@@ -267,8 +272,7 @@ def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, in
         start = time.perf_counter()
         per_pass = renderer.passes(pixels[members], spp_per_pass, passes, seed)
         elapsed += time.perf_counter() - start
-        standard_error = per_pass.sum(axis=2).std(axis=0, ddof=1) / math.sqrt(passes)
-        pool.add(members, spp_per_pass * passes, per_pass.mean(axis=0), standard_error)
+        pool.add(members, spp_per_pass * passes, *renderer.statistics(per_pass))
 
     for round_index, seed in enumerate(seeds):
         if round_index == 0:
