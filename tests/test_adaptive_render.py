@@ -27,18 +27,23 @@ def test_pixel_relative_error_is_the_worst_wavelength():
 def test_render_to_error_reaches_the_target_in_every_direction_with_honest_error_bars(mi):
     """Every pixel, the dark ground below the horizon included, reaches the target in its worst
     channel; pixels get different sample counts; the radiance agrees with an independent
-    high-sample render within the stated standard errors."""
+    high-sample render within the stated standard errors, value by value (mean z^2) and all
+    together: a 1% bias would shift each z by ~0.6 and the mean z of the 144 values by ~7
+    standard deviations."""
+    # Pixel centres (zenith 15, 45, ... deg; azimuth 22.5, 67.5, ... deg) miss the solar disk, whose
+    # hit-or-miss share of an area-sampled pixel no target of this size can resolve.
     scene = Scene(sun=Sun(zenith_deg=40.0), camera=Camera(width=8, height=6), wavelengths="rgb",
-                  render=RenderSettings(passes=16))
-    sky = render_to_error(scene, 0.05, seeds=list(range(11, 19)), max_spp=16384)
+                  render=RenderSettings(passes=16, pixel_sampling="centre"))
+    sky = render_to_error(scene, 0.015, seeds=list(range(11, 19)), max_spp=65536)
     worst = pixel_relative_error(sky.radiance, sky.standard_error)
-    assert sky.metadata["pixels_at_target"] == 1.0 and np.all(worst <= 0.05), worst.max()
+    assert sky.metadata["pixels_at_target"] == 1.0 and np.all(worst <= 0.015), worst.max()
     low, high = sky.metadata["spp_range"]
-    assert 256 <= low < high <= 16384 and len(sky.metadata["seed"]) >= 2   # 256: the first round's 16 x 16
-    reference = render_sky(scene, spp=16384, passes=16, seed=99)
+    assert 256 <= low < high <= 65536 and len(sky.metadata["seed"]) >= 2   # 256: the first round's 16 x 16
+    reference = render_sky(scene, spp=65536, passes=16, seed=99)
     z = (sky.radiance - reference.radiance) / np.hypot(sky.standard_error, reference.standard_error)
     assert np.all(np.isfinite(z)) and z.size == 8 * 6 * 3
     assert 0.5 < np.mean(z ** 2) < 1.8, np.mean(z ** 2)
+    assert abs(np.mean(z)) * np.sqrt(z.size) < 4.0, np.mean(z)
 
 
 def test_render_to_error_refuses_a_target_out_of_range():
