@@ -197,6 +197,77 @@ def test_single_scattering_quadrature_hard_cases(mi, case):
     assert np.all(np.abs(error[np.isfinite(error)]) < 1e-4), error
 
 
+# --- single scattering sampled at a few points, against the quadrature ------------------------------
+
+
+@pytest.mark.parametrize("case", ["clear",
+                                  pytest.param("hazy", marks=pytest.mark.xfail(strict=True, reason=(
+                                      "open (issue 14): 1.4e-3 (z 26) at 680 nm on the ray from 20 km down "
+                                      "to the ground, where the quadrature itself is off by up to 3e-4 "
+                                      "(test_single_scattering_quadrature_hard_cases); which side is off "
+                                      "is not settled"))),
+                                  pytest.param("twilight", marks=pytest.mark.xfail(strict=True, reason=(
+                                      "open (issue 14): 1.6e-3 (z 14) on the ray from 15 km towards the "
+                                      "sun's side through the shadow boundary, where the quadrature is off "
+                                      "by up to 9e-4; which side is off is not settled")))])
+def test_sampled_sunlight_is_the_quadrature_on_average(mi, case):
+    """The points of ``sampled_sunlight`` (drawn by the panels' lit masses) average to the
+    quadrature's single scattering on the same segments: rising, descending, horizontal and
+    ground-bound segments from 0.5-30 km, on a clear sky (sun zenith 60), a hazy one
+    (turbidity 6) and at twilight (sun zenith 96, where segments cross the planet's shadow).
+    2^16 jittered-stratified draws per segment: within 3e-3 of the quadrature, and within 1e-4
+    or |z| < 4 (64 interleaved groups of draws as independent estimates) per segment and
+    channel, and exactly
+    0 where the whole segment is in the shadow. (The sampled estimate is noisiest in the least
+    extinguished channel of an optically thick segment, whose far end the grey proxy visits
+    rarely: 680 nm on a hazy ray from 20 km down to the ground.)"""
+    import drjit as dr
+
+    import skyref.atmosphere as atm
+    from skyref.plugins.line_integral import GreyProxy
+    from skyref.scene import direction_from_angles
+
+    atmosphere = atm.from_turbidity(6.0) if case == "hazy" else atm.bruneton2017()
+    sun_zenith = 96.0 if case == "twilight" else 60.0
+    integ = line_integrator(mi, atmosphere, sun_zenith)
+    line, geometry = integ.line, integ.geometry
+    sun = integ.sun.direction
+    segments = [(500.0, 0.0, 0.0), (2000.0, 80.0, 180.0), (8000.0, 90.0, 0.0), (30_000.0, 95.0, 180.0),
+                (1000.0, 120.0, 90.0), (15_000.0, 60.0, 0.0), (5000.0, 91.0, 0.0), (20_000.0, 100.0, 180.0)]
+    draws = 1 << 16
+    n = len(segments) * draws
+    lane = dr.arange(mi.UInt32, n)
+    segment = lane // draws
+    altitude = np.array([h for h, _, _ in segments], np.float32)
+    directions = np.array([direction_from_angles(z, a) for _, z, a in segments], np.float32)
+    h = dr.gather(mi.Float, mi.Float(altitude), segment)
+    p = mi.Point3f(0.0, 0.0, h - geometry.h0)                    # straight above the observer
+    d = dr.gather(mi.Vector3f, mi.Vector3f(*(mi.Float(directions[:, i]) for i in range(3))), segment)
+    channels = integ.optics.channel_coefficients([mi.UInt32(k) for k in range(len(WL))])
+    grey = GreyProxy(channels, channels.zeros() + 1.0)
+    t_ground = geometry.distance_to_ground(p, d, h)
+    length = dr.minimum(t_ground, geometry.distance_to_top(p, d, h))
+    exact, _, _ = line.integrate(channels, p, d, h, length, sun, grey, sunlight="quadrature")
+    _, _, quadrature = line.integrate(channels, p, d, h, length, sun, grey, sunlight="sampled")
+    jitter = np.random.default_rng(3).uniform(0.0, 1.0, n).astype(np.float32)
+    u = (mi.Float(lane % draws) + mi.Float(jitter)) / draws      # jittered: one stratum per draw
+    sampled = line.sampled_sunlight(channels, quadrature, p, d, sun, u, 4)
+    exact = np.array([np.array(x) for x in exact]).T.reshape(len(segments), draws, len(WL))[:, 0]
+    sampled = np.array([np.array(x) for x in sampled]).T.reshape(len(segments), draws, len(WL))
+    # 64 independent estimates: the draws of every 64th stratum (independent jitters)
+    groups = sampled.reshape(len(segments), draws // 64, 64, len(WL)).mean(axis=1)
+    mean, se = groups.mean(axis=1), groups.std(axis=1, ddof=1) / 8.0
+    lit = exact > 1e-12 * exact.max()
+    relative = np.where(lit, mean / np.where(lit, exact, 1.0) - 1.0, 0.0)
+    z = np.where(lit, (mean - exact) / np.maximum(se, 1e-37), 0.0)
+    print(f"{case}: max |relative| {np.max(np.abs(relative)):.1e}, max |z| {np.max(np.abs(z)):.2f}")
+    assert np.all(mean[~lit] == 0.0)
+    assert np.all(np.abs(relative) < 3e-3), relative
+    # beyond the noise only by the two rules' own difference (the points' optical depth by the
+    # rule on [a, t], the nodes' by the panel's cumulative matrix): at most 1e-4
+    assert np.all((np.abs(z) < 4.0) | (np.abs(relative) < 1e-4)), (z, relative)
+
+
 # --- the whole estimator against delta tracking ------------------------------------------------------
 
 
@@ -243,11 +314,12 @@ def test_camera_light_traced_apart_matches_whole_paths(mi):
         return mi.Point3f(0.0), dr.gather(mi.Vector3f, table, target), mi.Bool(True)
 
     apart = integ.render_directions(views, seed=3, spp=1024, batches=16).numpy()        # (16, M, 4, N)
-    whole = integ._estimate(4, len(views), 1024, 16, camera_rays, False).numpy().reshape(apart.shape)
+    whole = integ._estimate(4, len(views), 3072, 16, camera_rays, False).numpy().reshape(apart.shape)
     estimates = [(x.mean(axis=0), x.std(axis=0, ddof=1) / 4.0) for x in (apart, whole)]
     (a, se_a), (b, se_b) = estimates
     lit = (a[:, 1:3] > 0.0)
     z = (a - b)[:, 1:3][lit] / np.hypot(se_a, se_b)[:, 1:3][lit]
-    print(f"apart vs whole: max |z| {np.max(np.abs(z)):.2f}, single rel. se {np.max(se_a[:, 1] / a[:, 1]):.1e}")
+    print(f"apart vs whole: max |z| {np.max(np.abs(z)):.2f}, single rel. se {np.max(se_a[:, 1] / a[:, 1]):.1e}, "
+          f"whole orders 1-2 rel. se {np.max(se_b[:, 1:3].sum(axis=1) / b[:, 1:3].sum(axis=1)):.1e}")
     assert np.all(se_b[:, 1:3].sum(axis=1) / b[:, 1:3].sum(axis=1) < 5e-3)
     assert np.all(np.abs(z) < 4.0), z

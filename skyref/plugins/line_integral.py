@@ -16,10 +16,16 @@ Every optical depth is computed per constituent at relative density 1 and multip
 channel's coefficients, so the geometry is paid once for all wavelengths.
 
 The path then goes on from a *forced collision*: a point of the segment drawn with a density
-proportional to a grey proxy of sigma_s(t) T(0, t) (a panel by its quadrature mass, then a
+proportional to a grey proxy of sigma_s(t) T(0, t) (:class:`GreyProxy`; a panel by its quadrature mass, then a
 point uniform in the panel's variable u), weighted by the exact sigma_s(t) T(0, t) / pdf(t) per channel — or, if the
 segment ends on the ground, from the ground with probability proportional to its grey
 T(0, L) x albedo. Every path scatters: none is wasted on light that leaves the atmosphere.
+
+On segments after the camera's, S is *sampled* instead (:meth:`LineIntegral.sampled_sunlight`):
+a few stratified points drawn like the forced collision, but by the lit panels' masses only, each
+weighted by sigma_s T / pdf, times the phase function and the sun's transmittance there. The
+quadrature's nodes each need a sun lookup; the points need one each, and since sigma_s T is what
+they are drawn by, the estimate varies only with the sun's transmittance along the segment.
 
 References
 ----------
@@ -35,7 +41,7 @@ import mitsuba as mi
 from skyref.plugins.drjit_namespace import xp
 from skyref.plugins.quadrature import NODES_PER_PANEL, GaussLegendreRule, insert_sorted, ordered_breakpoints
 
-__all__ = ["PANEL_THICKNESS", "OPTICAL_DEPTH_BREAKS", "grey_sum", "SegmentQuadrature", "LineIntegral"]
+__all__ = ["PANEL_THICKNESS", "OPTICAL_DEPTH_BREAKS", "grey_sum", "GreyProxy", "PanelMap", "SegmentQuadrature", "LineIntegral"]
 
 #: Optical thickness (most transparent channel) above which a panel's nodes are spaced evenly
 #: in that channel's transmittance.
@@ -52,17 +58,66 @@ def grey_sum(grey, per_constituent):
     return sum((g * x for g, x in zip(grey, per_constituent) if g is not None), mi.Float(0.0))
 
 
+class GreyProxy:
+    """What a path's sampling decisions see of its channels (detached Floats per constituent):
+    the throughput-weighted mean scattering and extinction coefficients (``channels.grey``) and
+    the smallest extinction over the channels (``channels.least``). Its transmittance is the
+    mean of the grey one and the most transparent channel's bound, so that where the mean
+    channel has long been extinguished (a hazy horizon: e^-100 in blue, e^-10 in red) the
+    proxy, and with it the probability of sampling there, stays at least half of every
+    channel's: no channel's light falls below float32 resolution of the sampling masses."""
+
+    def __init__(self, channels, throughput):
+        self.scattering, self.extinction, self.albedo = channels.grey(throughput)
+        self.least = channels.least
+
+    def transmittance(self, unit_depths):
+        """Proxy transmittance for the per-constituent optical depths at relative density 1."""
+        return 0.5 * (dr.exp(-grey_sum(self.extinction, unit_depths)) + dr.exp(-grey_sum(self.least, unit_depths)))
+
+
 class SegmentQuadrature:
     """The quadrature of one segment: its panels [a_i, b_i] and their changes of variable
-    (:meth:`LineIntegral._panel_map`), the optical depth per constituent at each panel's start
-    (``prefix``) and in total, and each panel's grey scattering mass (for the forced collision)."""
+    (:class:`PanelMap`), the optical depth per constituent at each panel's start
+    (``prefix``) and in total, and each panel's grey scattering mass (for the forced collision)
+    and, where the panels were split at the planet's shadow, its mass if lit (else 0), for
+    :meth:`LineIntegral.sampled_sunlight`; None otherwise."""
 
-    def __init__(self, panels, maps, prefix, total, masses):
+    def __init__(self, panels, maps, prefix, total, masses, lit_masses):
         self.panels = panels
         self.maps = maps
         self.prefix = prefix
         self.total = total
         self.masses = masses
+        self.lit_masses = lit_masses
+
+
+class PanelMap:
+    """The change of variable t = a + width g(u), u in [0, 1], of one panel. For a panel of
+    optical thickness kappa in its most transparent channel above PANEL_THICKNESS,
+    g(u) = -ln(1 - u (1 - e^-kappa)) / kappa, which spaces the nodes evenly in that channel's
+    transmittance (a horizontal ray through hazy air loses e^-50 in its first panel); every
+    other channel's transmittance is then (1 - u (1 - e^-kappa))^(k / k_min - 1), a low power
+    of u that the rule integrates well. Thinner panels are uniform, g(u) = u."""
+
+    def __init__(self, kappa):
+        self.thick = kappa > PANEL_THICKNESS
+        self.loss = -dr.select(self.thick, dr.exp(-kappa) - 1.0, 0.0)
+        self.inv_kappa = dr.rcp(dr.select(self.thick, kappa, 1.0))
+
+    def __call__(self, u):
+        """(g(u), g'(u))."""
+        left = 1.0 - u * self.loss
+        return (dr.select(self.thick, -dr.log(left) * self.inv_kappa, u),
+                dr.select(self.thick, self.loss * self.inv_kappa / left, 1.0))
+
+    def select(self, chosen, other: "PanelMap") -> "PanelMap":
+        """This map where ``chosen``, ``other`` elsewhere."""
+        merged = PanelMap.__new__(PanelMap)
+        merged.thick = dr.select(chosen, self.thick, other.thick)
+        merged.loss = dr.select(chosen, self.loss, other.loss)
+        merged.inv_kappa = dr.select(chosen, self.inv_kappa, other.inv_kappa)
+        return merged
 
 
 class LineIntegral:
@@ -83,12 +138,12 @@ class LineIntegral:
         """Panel boundaries: the level crossings; where it has crossed OPTICAL_DEPTH_BREAKS of
         optical depth in its most transparent channel at the extinction of its start (an
         optically thick segment, e.g. a horizontal ray through hazy air, loses most of its light
-        within one level panel); and, for the ``sunlight`` along it, where the segment enters and
-        leaves the planet's shadow. Returns the panels and, with ``sunlight``, whether each is lit
-        (else None)."""
+        within one level panel); and, where ``sunlight`` is computed, where the segment enters and
+        leaves the planet's shadow. Returns the panels and, unless ``sunlight`` is None, whether
+        each is lit (else None)."""
         crossings = [self.geometry.level_crossings(p, d, h, level) for level in self.levels]
         breakpoints = ordered_breakpoints(crossings, length, rising_only, xp)
-        if sunlight:
+        if sunlight is not None:
             t_in, t_out = self.geometry.shadow_interval(p, d, length, sun)
             breakpoints = insert_sorted(insert_sorted(breakpoints, t_in, xp), t_out, xp)
         rho = [c.density(h) for c in self.optics.components]
@@ -96,7 +151,7 @@ class LineIntegral:
         for tau in OPTICAL_DEPTH_BREAKS:
             breakpoints = insert_sorted(breakpoints, dr.minimum(tau * inv_extinction, length), xp)
         panels = list(zip(breakpoints[:-1], breakpoints[1:]))
-        if not sunlight:
+        if sunlight is None:
             return panels, [None] * len(panels)
         lit = [~((0.5 * (a + b) > t_in) & (0.5 * (a + b) < t_out)) for a, b in panels]
         return panels, lit
@@ -108,14 +163,16 @@ class LineIntegral:
 
     # --- single scattering along the segment ----------------------------------------------------
 
-    def integrate(self, channels, p, d, h, length, sun, grey, rising_only=False, sunlight=True):
+    def integrate(self, channels, p, d, h, length, sun, grey, rising_only=False, sunlight="quadrature"):
         """Single-scattered sunlight along the segment per channel (ArrayXf, to be multiplied by
         E_sun), its transmittance T(0, L) per channel, and the :class:`SegmentQuadrature`.
-        ``grey`` = (grey scattering, grey extinction) coefficients per constituent (detached
-        Floats or None), for the forced collision's proxy. ``rising_only``: the caller
-        guarantees the segment never descends (a ray leaving the ground). Without ``sunlight``
-        only the quadrature is built (for a forced collision whose single scattering is counted
-        elsewhere: no sun optical depths, no per-channel exponentials) and the sunlight is 0."""
+        ``grey``: the path's :class:`GreyProxy`, for the forced collision's proxy. ``rising_only``: the caller
+        guarantees the segment never descends (a ray leaving the ground). ``sunlight``:
+        ``"quadrature"`` integrates it here; ``"sampled"`` only splits the panels at the
+        shadow and keeps their lit masses, for :meth:`sampled_sunlight`; None builds the
+        quadrature alone (for a forced collision whose single scattering is counted elsewhere).
+        Either of the last two skips the sun's optical depths and per-channel exponentials at
+        the nodes, and returns sunlight 0."""
         optics, rule = self.optics, self.rule
         components = optics.components
         panels, lit = self._panels(channels, p, d, h, length, sun, rising_only, sunlight)
@@ -123,7 +180,6 @@ class LineIntegral:
         phase = [None if s is None else c.phase(cos_scatter)
                  for c, (s, _) in zip(components, channels.coefficients)]
         extinction = channels.extinction
-        grey_s, grey_t = grey
         light = channels.zeros()
         prefix = [mi.Float(0.0) for _ in components]
         prefixes, masses, maps = [], [], []
@@ -142,7 +198,7 @@ class LineIntegral:
                 tau = [prefix[c] + sum(rule.cumulative[j][m] * density_du[m][c] for m in range(rule.count))
                        for c in range(len(components))]
                 weight = width * stretch[j][1] * rule.weights[j]
-                if sunlight:
+                if sunlight == "quadrature":
                     tau_sun = self.sun_depth(hx, dr.dot(self.geometry.up(x), sun))
                     exponent = channels.zeros()
                     source = channels.zeros()
@@ -153,60 +209,48 @@ class LineIntegral:
                             source = source + channels.coefficients[c][0] * (rho[c] * phase[c])
                     light = light + source * dr.exp(-exponent) * dr.select(panel_lit, weight, 0.0)
                 # grey proxy of sigma_s(t) T(0, t), for the forced collision
-                mass = mass + weight * dr.detach(grey_sum(grey_s, rho) * dr.exp(-grey_sum(grey_t, tau)))
+                mass = mass + weight * dr.detach(grey_sum(grey.scattering, rho) * grey.transmittance(tau))
             masses.append(mass)
             prefix = [prefix[c] + sum(rule.weights[m] * density_du[m][c] for m in range(rule.count))
                       for c in range(len(components))]
         transmittance = dr.exp(-channels.optical_depth(prefix))
-        return light, transmittance, SegmentQuadrature(panels, maps, prefixes, prefix, masses)
+        lit_masses = None if sunlight is None else [dr.select(on, m, 0.0) for on, m in zip(lit, masses)]
+        return light, transmittance, SegmentQuadrature(panels, maps, prefixes, prefix, masses, lit_masses)
 
     def _panel_map(self, channels, p, d, a, width):
-        """The change of variable t = a + width g(u), u in [0, 1], of one panel: uniform for an
-        optically thin panel, and for one of optical thickness kappa in its most transparent
-        channel (estimated at its midpoint) g(u) = -ln(1 - u (1 - e^-kappa)) / kappa, which
-        spaces the nodes evenly in that channel's transmittance (a horizontal ray through hazy
-        air loses e^-50 in its first panel). Every other channel's transmittance is then
-        (1 - u (1 - e^-kappa))^(k / k_min - 1), a low power of u that the rule integrates well.
-        Returns u -> (g(u), g'(u))."""
+        """The :class:`PanelMap` of the panel [a, a + width]: uniform for an optically thin
+        panel, spaced evenly in its most transparent channel's transmittance for a thick one
+        (its optical thickness estimated at the panel's midpoint)."""
         _, _, rho = self._densities(p, d, a + 0.5 * width)
-        kappa = dr.detach(width * dr.min(channels.optical_depth(rho), axis=0))
-        thick = kappa > PANEL_THICKNESS
-        loss = -dr.select(thick, dr.exp(-kappa) - 1.0, 0.0)
-        inv_kappa = dr.rcp(dr.select(thick, kappa, 1.0))
-
-        def stretch(u):
-            left = 1.0 - u * loss
-            return dr.select(thick, -dr.log(left) * inv_kappa, u), dr.select(thick, loss * inv_kappa / left, 1.0)
-
-        return stretch
+        return PanelMap(dr.detach(width * dr.min(channels.optical_depth(rho), axis=0)))
 
     # --- the forced collision ------------------------------------------------------------------
 
-    def sample_collision(self, channels, quadrature, p, d, u):
+    def sample_collision(self, channels, quadrature, p, d, u, masses=None):
         """A point of the segment from one uniform number ``u``: the panel i chosen by its grey
         mass (u falls in its share of the cumulative masses), then t = a_i + (b_i - a_i) g_i(v)
         with v the position of u within that share (uniform; pdf(t) = (mass_i / total) /
-        ((b_i - a_i) g_i'(v))), so that stratified u give stratified points. Returns (point,
+        ((b_i - a_i) g_i'(v))), so that stratified u give stratified points. ``masses``: the
+        panels' masses to draw by (default: the quadrature's grey masses). Returns (point,
         altitude, sigma_s(t) T(0, t) / pdf(t) per channel, the local coefficients (parts,
         sigma_s, sigma_t) at the point). The caller makes sure the total mass is positive."""
-        total = sum(quadrature.masses, mi.Float(0.0))
+        masses = quadrature.masses if masses is None else masses
+        total = sum(masses, mi.Float(0.0))
         target = u * total
         cumulative = mi.Float(0.0)
         a, width, mass, start = mi.Float(0.0), mi.Float(0.0), mi.Float(1.0), mi.Float(0.0)
         prefix = [mi.Float(0.0) for _ in quadrature.total]
-        chosen_panels = []
-        for (lo, hi), panel_prefix, panel_mass in zip(quadrature.panels, quadrature.prefix, quadrature.masses):
+        panel_map = quadrature.maps[0]
+        for (lo, hi), panel_prefix, panel_mass, panel_map_i in zip(quadrature.panels, quadrature.prefix,
+                                                                   masses, quadrature.maps):
             chosen = (target >= cumulative) & (panel_mass > 0.0)
-            chosen_panels.append(chosen)
             a, width, mass = dr.select(chosen, lo, a), dr.select(chosen, hi - lo, width), dr.select(chosen, panel_mass, mass)
             start = dr.select(chosen, cumulative, start)
             prefix = [dr.select(chosen, q, old) for q, old in zip(panel_prefix, prefix)]
+            panel_map = panel_map_i.select(chosen, panel_map)
             cumulative = cumulative + panel_mass
         v = dr.clip((target - start) / mass, 0.0, 1.0 - 2.0 ** -24)
-        g, dg = mi.Float(0.0), mi.Float(1.0)
-        for chosen, panel_map in zip(chosen_panels, quadrature.maps):
-            g_panel, dg_panel = panel_map(v)
-            g, dg = dr.select(chosen, g_panel, g), dr.select(chosen, dg_panel, dg)
+        g, dg = panel_map(v)
         step = g * width
         t = a + step
         # optical depth from the panel's start to t, by the rule on [a, t]
@@ -221,3 +265,32 @@ class LineIntegral:
         pdf = mass / (total * dr.maximum(width * dg, 1e-30))
         weight = sigma_s * dr.exp(-channels.optical_depth(tau)) / pdf
         return x, hx, weight, (parts, sigma_s, sigma_t)
+
+    # --- single scattering along the segment, sampled ----------------------------------------------
+
+    def sampled_sunlight(self, channels, quadrature, p, d, sun, u, points: int):
+        """An unbiased estimate of the segment's single-scattered sunlight (what
+        :meth:`integrate` computes by quadrature, per channel, to be multiplied by E_sun) from
+        ``points`` stratified points u_k = (u + k) / points mod 1, drawn by the panels' lit
+        masses (``integrate(..., sunlight="sampled")``):
+
+            S ~ 1/K sum_k sigma_s(t_k) T(0, t_k) / pdf(t_k)  p(omega . s)  T_sun(t_k) V(t_k).
+
+        The phase function is constant along the segment and sigma_s T is what the points are
+        drawn by, so the estimate varies only with the sun's transmittance (and the channels'
+        departure from the grey proxy): a few points carry a segment, at one sun lookup each,
+        where the quadrature pays one per node. Segments with no lit mass give 0."""
+        lit_total = sum(quadrature.lit_masses, mi.Float(0.0))
+        cos_scatter = dr.dot(d, sun)
+        light = channels.zeros()
+        for k in range(points):
+            u_k = u + k / points
+            u_k = dr.minimum(dr.select(u_k >= 1.0, u_k - 1.0, u_k), 1.0 - 2.0 ** -24)
+            x, hx, weight, (parts, sigma_s, _) = self.sample_collision(channels, quadrature, p, d, u_k,
+                                                                       quadrature.lit_masses)
+            # a point of a lit panel can still fall a rounding error into the shadow
+            lit = self.geometry.distance_to_ground(x, sun, hx) == dr.inf
+            tau_sun = self.sun_depth(hx, dr.dot(self.geometry.up(x), sun))
+            light += dr.select(lit, weight * self.optics.phase(parts, sigma_s, cos_scatter)
+                               * dr.exp(-channels.optical_depth(tau_sun)), 0.0)
+        return dr.select(lit_total > 0.0, light * (1.0 / points), 0.0)

@@ -271,7 +271,7 @@ def direction_with_cosine(d, mu, u_phi):
 class PathChannels:
     """A path's K channels: per component (scattering, absorption) coefficients at relative
     density 1 as ArrayXf (None for a zero term), the ground albedo, and per component the largest
-    extinction over the channels (detached; for majorants)."""
+    and smallest extinction over the channels (detached; for majorants and sampling proxies)."""
 
     def __init__(self, count, coefficients, albedo):
         self.count = count
@@ -280,6 +280,8 @@ class PathChannels:
         #: extinction at relative density 1 per component (ArrayXf, or None for a zero term)
         self.extinction = [s if a is None else (a if s is None else s + a) for s, a in coefficients]
         self.bounds = [dr.detach(dr.max(k, axis=0)) for k in self.extinction]
+        #: the smallest extinction over the channels per component (detached; None for a zero term)
+        self.least = [None if k is None else dr.detach(dr.min(k, axis=0)) for k in self.extinction]
 
     def zeros(self):
         return mi.ArrayXf([mi.Float(0.0)] * self.count)
