@@ -185,7 +185,7 @@ def _load_tables(path: str) -> dict:
 
 
 def cmd_audit(args) -> int:
-    from skyref.audit.audit import audit, summary_table, write_report  # lazy: see the module docstring
+    from skyref.audit.audit import audit, scale_table, summary_table, write_report  # lazy: see the module docstring
 
     if args.method not in METHODS and args.method not in MODELS:
         raise ParameterError("--method", args.method, ", ".join([*METHODS, *MODELS]), "unknown method")
@@ -211,8 +211,9 @@ def cmd_audit(args) -> int:
     result = audit(method, scene, max_spp=args.max_spp, cache_dir=os.path.join("out", "audit", "ground-truth"),
                    log=(lambda *_: None) if args.quiet else print)
     path = write_report(result, directory)
-    print("\n".join(summary_table(result)))
-    print(f"precompute {result.precompute_s:.2f} s, lookup {1e9 * result.lookup_s_per_direction:.0f} ns/direction; "
+    print("\n".join(summary_table(result) + [""] + scale_table(result)))
+    print(f"on this CPU (skyref's implementation, warm): precompute {result.precompute_s:.2f} s, per view "
+          f"{1e3 * result.per_view_s:,.1f} ms, lookup {1e9 * result.lookup_s_per_direction:,.0f} ns/direction; "
           f"report: {path}")
     return 0
 

@@ -5,15 +5,19 @@ lookup starts with.
 A sky method is built from an :class:`~skyref.atmosphere.Atmosphere` and a wavelength grid,
 :meth:`SkyMethod.precompute` builds its tables (timed), and ``radiance(directions,
 sun_direction, observer_altitude_m)`` returns W m^-2 sr^-1 nm^-1 along unit view directions
-in the observer's east-north-up frame, without the solar disk.
+in the observer's east-north-up frame, without the solar disk. :meth:`SkyMethod.operations`
+counts what its lookups and per-view tables cost (:class:`Operations`), beside the timings of
+skyref's own CPU implementation.
 """
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import importlib
 import inspect
 import time
+from dataclasses import dataclass, field
 
 from tqdm import tqdm
 
@@ -21,7 +25,7 @@ from skyref._llvm import configure_libllvm
 from skyref.validation import check_choice, check_view
 from skyref.errors import ParameterError
 
-__all__ = ["Registry", "SkyMethod"]
+__all__ = ["Operations", "Registry", "SkyMethod", "describe_operations"]
 
 
 class Registry:
@@ -68,6 +72,48 @@ class Registry:
         return method
 
 
+@dataclass(frozen=True)
+class Operations:
+    """What a sky method's costs pay for, counted from its table sizes and algorithm (not timed),
+    so that a user of another engine (a GPU shader) can read its CPU timings.
+
+    ``tables``: name -> cells per axis of each table the lookups read (every cell holds all the
+    wavelength channels). ``sky`` and ``ground``: what one view direction that misses (meets) the
+    ground costs, what -> count; ``ground`` empty where the method has no ground. A *fetch* of a
+    table is one interpolated read at one point, every channel at once (bilinear in a 2D table,
+    trilinear in a 3D one: one ``texture()`` call where the channels fit a texel). ``per_view``:
+    the work when the sun or the observer moves, what -> count. ``note``: what the counts leave
+    out, in words.
+    """
+
+    tables: dict = field(default_factory=dict)
+    sky: dict = field(default_factory=dict)
+    ground: dict = field(default_factory=dict)
+    per_view: dict = field(default_factory=dict)
+    note: str = ""
+
+    def to_dict(self) -> dict:
+        """JSON-ready: table shapes as lists."""
+        return {**dataclasses.asdict(self), "tables": {k: list(v) for k, v in self.tables.items()}}
+
+
+def describe_operations(operations: dict) -> str:
+    """One line of text for :meth:`Operations.to_dict`'s dict (as read back from JSON)."""
+
+    def counts(items: dict) -> str:
+        return ", ".join(f"{value:,} {what}" for what, value in items.items())
+
+    parts = [f"per sky direction: {counts(operations['sky']) or 'nothing'}"]
+    if operations["ground"]:
+        parts.append(f"per ground direction: {counts(operations['ground'])}")
+    if operations["per_view"]:
+        parts.append(f"per view: {counts(operations['per_view'])}")
+    if operations["tables"]:
+        parts.append("tables: " + ", ".join(f"{name} {'x'.join(map(str, shape))}"
+                                            for name, shape in operations["tables"].items()))
+    return "; ".join(parts) + (f" ({operations['note']})" if operations["note"] else "")
+
+
 class SkyMethod:
     """Base class: subclasses set :attr:`name` and implement ``_precompute()``; their
     ``radiance`` starts with :meth:`_checked_view`."""
@@ -110,6 +156,10 @@ class SkyMethod:
             bar.update(bar.total - bar.n)
 
     def _precompute(self):
+        raise NotImplementedError
+
+    def operations(self) -> Operations:
+        """What a lookup and a new view cost, counted (see :class:`Operations`)."""
         raise NotImplementedError
 
     def _finish(self):

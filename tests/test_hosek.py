@@ -242,3 +242,74 @@ def test_hosek_sky_refuses_observers_and_suns_outside_its_data():
         sky.radiance(views, direction_from_angles(np.array(30.0), np.array(0.0)), 5000.0)
     with pytest.raises(ParameterError, match="sun zenith"):
         sky.radiance(views, direction_from_angles(np.array(95.0), np.array(0.0)), 0.0)
+
+
+# --- Bruneton 2017's solar-spectrum correction ------------------------------------------------------
+
+def _independent_correction(wavelength_nm):
+    """E / (Omega L_HW) at one wavelength from the data files, without skyref's code: L_HW read
+    from the bundled CSV and interpolated linearly between its two neighbouring band centres (or
+    the 720 nm value above it); E the mean of pvlib's ASTM G173 extraterrestrial table over the
+    10 nm bin around it (trapezoid on a fine grid); Omega the cap of Bruneton's 0.00935 / 2 rad
+    solar radius."""
+    import csv
+    from importlib import resources
+
+    import pvlib
+
+    text = (resources.files("skyref.analytic") / "data" / "hosek_solar_radiance.csv").read_text()
+    rows = list(csv.reader(line for line in text.splitlines() if not line.startswith("#")))[1:]
+    table = {float(w): float(v) for w, v in rows}
+    at = min(wavelength_nm, 720.0)
+    below = 320.0 + 40.0 * math.floor((at - 320.0) / 40.0)
+    above = min(below + 40.0, 720.0)
+    weight = 0.0 if above == below else (at - below) / 40.0
+    radiance = (1.0 - weight) * table[below] + weight * table[above]
+    astm = pvlib.spectrum.get_reference_spectra(standard="ASTM G173-03")
+    fine = np.linspace(at - 5.0, at + 5.0, 20001)
+    values = np.interp(fine, astm.index.to_numpy(float), astm["extraterrestrial"].to_numpy(float))
+    irradiance = float(np.sum(0.5 * (values[1:] + values[:-1]) * np.diff(fine)) / 10.0)
+    solid_angle = 2.0 * math.pi * (1.0 - math.cos(0.00935 / 2.0))
+    return irradiance / (solid_angle * radiance)
+
+
+def test_solar_spectrum_correction_is_the_ratio_of_the_two_suns():
+    """With solar_spectrum_correction the published sky at each wavelength is multiplied by
+    skyref's solar irradiance over the one the model assumes (Omega L_HW), computed here from the
+    data files; above 720 nm the model's 720 nm sky keeps the 720 nm factor. The correction is
+    large below 400 nm and small in the visible (the atmosphere's ozone data start at 360 nm)."""
+    from skyref.analytic import analytic_model
+    from skyref.atmosphere import from_turbidity
+    from skyref.scene import direction_from_angles
+
+    wavelengths = [365.0, 380.0, 500.0, 560.0, 760.0]
+    atmosphere = from_turbidity(3.0)
+    plain = analytic_model("hosek2012", atmosphere, wavelengths)
+    corrected = analytic_model("hosek2012", atmosphere, wavelengths, solar_spectrum_correction=True)
+    views = direction_from_angles(np.array([0.0, 60.0, 85.0]), np.array([0.0, 90.0, 200.0]))
+    sun = direction_from_angles(np.array(40.0), np.array(180.0))
+    for model in (plain, corrected):
+        model.precompute()
+    ratio = corrected.radiance(views, sun, 0.0) / plain.radiance(views, sun, 0.0)
+    expected = np.array([_independent_correction(w) for w in wavelengths])
+    np.testing.assert_allclose(ratio, np.broadcast_to(expected, ratio.shape), rtol=1e-6)
+    assert expected[0] > 1.15 and abs(expected[3] - 1.0) < 0.06     # 365 nm: +20%; 560 nm: +5%
+    assert corrected.options["solar_spectrum_correction"] and not plain.options["solar_spectrum_correction"]
+
+
+def test_solar_spectrum_correction_is_an_option_of_the_published_model_only():
+    """The option passes the CLI's --option parsing and the registry's check; a fitted table
+    (already in skyref's sun) and a non-boolean are refused, naming the option."""
+    from skyref.analytic import REGISTRY, analytic_model
+    from skyref.atmosphere import from_turbidity
+    from skyref.cli import _option_value
+
+    name, value = _option_value("solar_spectrum_correction=true")
+    assert (name, value) == ("solar_spectrum_correction", True)
+    REGISTRY.check_options("hosek2012", {name: value}, parameter="--option")
+    atmosphere = from_turbidity(3.0)
+    with pytest.raises(ParameterError, match="solar_spectrum_correction.*fitted table"):
+        analytic_model("hosek2012", atmosphere, [550.0], table=published_table("spectral"),
+                       solar_spectrum_correction=True)
+    with pytest.raises(ParameterError, match="solar_spectrum_correction"):
+        analytic_model("hosek2012", atmosphere, [550.0], solar_spectrum_correction="yes")

@@ -301,3 +301,29 @@ def test_new_views_reuse_the_compiled_lookup_kernels(mi, name):
         dr.set_flag(dr.JitFlag.KernelHistory, False)
     assert hashes[0], "no lookup kernel was launched"
     assert all(h == hashes[0] for h in hashes[1:]), hashes
+
+
+@pytest.mark.parametrize("name", sorted(SMALL_TABLES))
+def test_operations_name_the_tables_the_method_holds(mi, name):
+    """The operation counts' tables are the method's tables at their sizes (the per-view ones once
+    a view is prepared; Elek's aerial-perspective volume is not among its exported tables), every
+    fetch names one of them, and Hillaire's per-view cells are those of its sky view."""
+    from skyref.atmosphere import preset
+    from skyref.lut import lut_method
+
+    method = lut_method(name, preset("bruneton2017"), "rgb", **SMALL_TABLES[name])
+    method.precompute()
+    method.prepare_view(np.array([0.5, 0.0, math.sqrt(0.75)]), 0.0)
+    tables = method.tables()
+    operations = method.operations()
+    for table, shape in operations.tables.items():
+        if table == "aerial_perspective":
+            continue
+        held = [array.shape[:-1] for key, array in tables.items() if key == table or key.startswith(table + "(")]
+        assert held == [tuple(shape)], (table, shape, {k: v.shape for k, v in tables.items()})
+    for what in [*operations.sky, *operations.ground, *operations.per_view]:
+        if "fetches" in what:
+            assert what.split()[0] in operations.tables, what
+    if name == "hillaire2020":
+        sky_view = next(array for key, array in tables.items() if key.startswith("sky_view("))
+        assert operations.per_view["sky_view cells"] == sky_view.shape[0] * sky_view.shape[1]

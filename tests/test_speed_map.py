@@ -53,15 +53,22 @@ def test_bad_tolerances_are_refused(text):
 
 # --- summaries and advice on hand-made rows -----------------------------------------------------
 
-def row(entry, sky, kind, rms, *, precompute=0.0, per_view=0.0, lookup=1e-9, regions=None, refused=False):
-    base = {"entry": entry, "family": "LUT", "method": entry.split()[0], "label": entry.split()[1],
+#: Operations of the hand-made rows (as a LUT method's Operations.to_dict()).
+OPERATIONS = {"tables": {"scattering": [4, 8, 16]}, "sky": {"scattering fetches": 2},
+              "ground": {"scattering fetches": 4}, "per_view": {}, "note": ""}
+
+
+def row(entry, sky, kind, rms, *, precompute=0.0, per_view=0.0, lookup=1e-9, regions=None, refused=False,
+        family="LUT", scale=None):
+    base = {"entry": entry, "family": family, "method": entry.split()[0], "label": entry.split()[1],
             "sky": sky, "kind": kind}
     if refused:
         return {**base, "refused": "outside its range"}
     statistics = {"sky": {"luminance_rms": rms, "luminance_p95": 2 * rms, "resolved": True, "delta_e_p95": 1.0}}
     for region, value in (regions or {}).items():
         statistics[region] = {"luminance_rms": value, "luminance_p95": value, "resolved": True, "delta_e_p95": 1.0}
-    return {**base, "precompute_s": precompute, "per_view_s": per_view, "lookup_s": lookup, "statistics": statistics}
+    return {**base, "precompute_s": precompute, "per_view_s": per_view, "lookup_s": lookup, "statistics": statistics,
+            "operations": OPERATIONS, "scale": scale}
 
 
 ROWS = [
@@ -121,6 +128,46 @@ def test_advice_says_nothing_above_the_tolerance_once_a_method_meets_it():
         assert lines[2].startswith("cheapest method meeting it")
         assert not any("most accurate" in line for line in lines), lines
         assert lines[-1] == COSTS_MEAN
+
+
+def test_advice_costs_say_whose_they_are_and_what_they_count():
+    """The cost of the advised method is labelled as the map's CPU's and its operation counts
+    follow it; the closing line says what the costs are and that per-view and lookup times are
+    warm."""
+    lines = advice_lines(entry_summary(ROWS), scene(sun=Sun(zenith_deg=40.0)), 0.02)
+    advised = lines[2]
+    assert "on the map's CPU" in advised
+    assert "counts: per sky direction: 2 scattering fetches; per ground direction: 4 scattering fetches" in advised
+    assert "tables: scattering 4x8x16" in advised
+    assert "first-call kernel compilation excluded" in lines[-1] and "table fetches" in lines[-1]
+    # A map written before operations were counted still advises, without the counts.
+    old = [{k: v for k, v in s.items() if k != "operations"} for s in entry_summary(ROWS)]
+    lines = advice_lines(old, scene(sun=Sun(zenith_deg=40.0)), 0.02)
+    assert lines[2].startswith("cheapest method meeting it: b (exact)") and "counts:" not in lines[2]
+
+
+def test_map_report_tables_show_operations_and_scale():
+    """The README's tables: what each entry's costs count, and per analytic entry and map sky the
+    RMS as it is -> after the best scale factor (s), refused skies marked."""
+    from skyref.audit.map_report import analytic_scale_table, operations_table
+    from skyref.audit.speed_map import MAP_SKIES
+
+    first, second = MAP_SKIES[0].name, MAP_SKIES[1].name
+    scale = {"factor": 0.606, "rms": 0.65, "noise_rms": 0.001, "resolved_rms": True,
+             "rms_scaled": 0.10, "noise_rms_scaled": 0.05, "resolved_rms_scaled": False}
+    rows = ROWS + [row("m published", first, "clear", 0.65, family="analytic", scale=scale),
+                   row("m published", second, "clear", 0.0, family="analytic", refused=True)]
+    summaries = entry_summary(rows)
+    lines = operations_table(summaries)
+    assert lines[0] == "| method | setting | what the costs count |"
+    assert ("| b | exact | per sky direction: 2 scattering fetches; per ground direction: 4 scattering fetches; "
+            "tables: scattering 4x8x16 |") in lines
+    lines = analytic_scale_table(summaries)
+    assert lines[0].startswith(f"| method | setting | {first} | {second} |")
+    assert len(lines) == 3     # the LUT entries have no row
+    cells = [c.strip() for c in lines[2].strip("|").split("|")]
+    assert cells[:4] == ["m", "published", "65.0 → 10.0* (s = 0.606)", "refused"]
+    assert cells[4:] == ["–"] * (len(MAP_SKIES) - 2)
 
 
 def test_advise_cli(tmp_path, capsys):

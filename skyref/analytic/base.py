@@ -31,7 +31,7 @@ from skyref.sky_method import SkyMethod
 __all__ = ["Component", "components", "exponential_components", "per_component", "phase_values", "sphere_distances",
            "hits_ground", "Segment", "atmosphere_segment", "radius_along_ray", "altitude_along_ray",
            "zenith_cosine_along_ray", "sun_cosine_along_ray", "column_along_rays", "one_minus_exp_over",
-           "AnalyticModel"]
+           "PER_VIEW_IN_LOOKUP", "AnalyticModel"]
 
 
 # --- the atmosphere as the models see it -------------------------------------------------------
@@ -195,6 +195,10 @@ def one_minus_exp_over(x):
 
 
 # --- the interface -----------------------------------------------------------------------------
+
+#: The note of an analytic model's :class:`~skyref.sky_method.Operations` that has per-view work.
+PER_VIEW_IN_LOOKUP = "skyref does the per-view work in every radiance call: its time is part of the lookup's"
+
 
 class AnalyticModel(SkyMethod):
     """Base class: subclasses set :attr:`name`, may override ``_precompute()`` and

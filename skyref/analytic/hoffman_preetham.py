@@ -52,10 +52,11 @@ import dataclasses
 
 import numpy as np
 
-from skyref.analytic.base import (AnalyticModel, Component, atmosphere_segment, components,
-                                  altitude_along_ray, one_minus_exp_over, phase_values,
+from skyref.analytic.base import (PER_VIEW_IN_LOOKUP, AnalyticModel, Component, atmosphere_segment,
+                                  components, altitude_along_ray, one_minus_exp_over, phase_values,
                                   sphere_distances, sun_cosine_along_ray, zenith_cosine_along_ray)
 from skyref.atmosphere.phase import HenyeyGreenstein
+from skyref.sky_method import Operations
 
 __all__ = ["henyey_greenstein_aerosols", "HoffmanPreetham2002"]
 
@@ -128,6 +129,15 @@ class HoffmanPreetham2002(AnalyticModel):
         segment = atmosphere_segment(r, mu_s, self.bottom_radius, self.top_radius)
         tau = self._optical_depth(self._segment_columns(r, mu_s, segment), r.size)
         return np.where(segment.ground[:, None], 0.0, self.solar_irradiance * np.exp(-tau))
+
+    def operations(self) -> Operations:
+        """Per direction: the path's column of every constituent (:meth:`column`, closed form)
+        and one exponential per wavelength; a ground view adds the columns towards the sun from
+        the ground point. Per view: the columns towards the sun from the observer."""
+        columns = len(self.components)
+        return Operations(sky={"constituent columns (closed form)": columns},
+                          ground={"constituent columns (closed form)": 2 * columns},
+                          per_view={"constituent columns (closed form)": columns}, note=PER_VIEW_IN_LOOKUP)
 
     def _radiance(self, r, mu, mu_s, nu):
         segment = atmosphere_segment(r, mu, self.bottom_radius, self.top_radius)

@@ -69,7 +69,7 @@ __all__ = ["BAND_CENTRES_NM", "TURBIDITIES", "ALBEDOS", "CONTROL_POINTS", "COEFF
            "CHANNELS", "UNITS", "HORIZON_OFFSET", "PEREZ_MIN_COS_THETA", "hosek_f", "perez_f", "FORMS",
            "elevation_parameter", "bezier_weights", "configuration_weights", "interpolate_configuration",
            "check_configuration", "check_view", "array_names", "CoefficientTable", "published_arrays",
-           "published_table"]
+           "published_table", "published_solar_radiance"]
 
 #: Centres of the published model's 40 nm bands, nm.
 BAND_CENTRES_NM = tuple(float(w) for w in range(320, 721, 40))
@@ -96,6 +96,7 @@ HORIZON_OFFSET = 0.01
 PEREZ_MIN_COS_THETA = 1e-6
 
 _PUBLISHED = "arhosek_v1.4a.npz"
+_PUBLISHED_SUN = "hosek_solar_radiance.csv"
 
 
 # --- the model forms ---------------------------------------------------------------------------
@@ -352,3 +353,17 @@ def published_table(kind: str = "spectral") -> CoefficientTable:
     "rgb")."""
     return CoefficientTable.from_arrays(published_arrays(), "hosek", kind,
                                         source="Hosek & Wilkie 2012, reference implementation 1.4a")
+
+
+@functools.lru_cache(maxsize=1)
+def published_solar_radiance() -> np.ndarray:
+    """The solar spectrum the published model assumes (``data/hosek_solar_radiance.csv``): the
+    radiance of the sun's disk at the top of the atmosphere, W m^-2 sr^-1 nm^-1, at
+    :data:`BAND_CENTRES_NM`. The published radiances scale with it: the authors' path tracer lit
+    the skies the model was fitted to with this sun."""
+    text = (resources.files("skyref.analytic") / "data" / _PUBLISHED_SUN).read_text(encoding="utf-8")
+    rows = [line for line in text.splitlines() if line and not line.startswith("#")][1:]   # after the header
+    wavelengths, radiance = np.loadtxt(rows, delimiter=",", ndmin=2).T
+    if not np.array_equal(wavelengths, BAND_CENTRES_NM):
+        raise ValueError(f"{_PUBLISHED_SUN}: wavelengths {wavelengths} are not the band centres {BAND_CENTRES_NM}")
+    return radiance

@@ -51,6 +51,7 @@ import numpy as np
 from skyref.analytic.base import (AnalyticModel, altitude_along_ray, atmosphere_segment,
                                   column_along_rays, components, hits_ground, per_component,
                                   phase_values, radius_along_ray, sphere_distances, sun_cosine_along_ray)
+from skyref.sky_method import Operations
 from skyref.validation import check_number
 
 __all__ = ["CHUNK_ELEMENTS", "Nishita1993"]
@@ -144,6 +145,17 @@ class Nishita1993(AnalyticModel):
         crossings = np.concatenate([near, far], axis=1)
         crossings = np.where((crossings > start) & (crossings < end), crossings, end)
         return np.sort(np.concatenate([start, crossings, end], axis=1), axis=1)
+
+    def operations(self) -> Operations:
+        """Per direction: the view ray's samples (its ends and its crossings of the inner
+        shells, :meth:`sample_distances`: 2 K for K shells, whether or not the ray crosses them
+        all), each reading the sun table (every constituent's column at once) and one
+        exponential per wavelength; the ground is the last sample. No per-view work: the sun
+        table is the precomputation."""
+        samples = 2 * self.shells
+        per_direction = {"samples along the ray": samples, "sun-table fetches": samples}
+        return Operations(tables={"sun table (shells x sun nodes)": (self.shells + 1, self.sun_nodes + 1)},
+                          sky=per_direction, ground=per_direction)
 
     def _radiance(self, r, mu, mu_s, nu):
         segment = atmosphere_segment(r, mu, self.bottom_radius, self.top_radius)

@@ -60,6 +60,7 @@ from skyref.analytic.base import (AnalyticModel, altitude_along_ray, atmosphere_
                                   column_along_rays, exponential_components, per_component,
                                   phase_values, sphere_distances, sun_cosine_along_ray,
                                   zenith_cosine_along_ray)
+from skyref.sky_method import Operations
 from skyref.validation import check_choice, check_number
 from skyref.errors import ParameterError
 
@@ -145,6 +146,15 @@ class ONeil2005(AnalyticModel):
     def density(self, altitude) -> np.ndarray:
         """rho_i(altitude) of every constituent: shape (C,) + altitude.shape."""
         return per_component(self.components, lambda c: c.profile.density(altitude), np.shape(altitude))
+
+    def operations(self) -> Operations:
+        """Per direction, for n ``samples`` and every constituent: the scale function at the
+        ray's start and towards the sun and along the ray at each sample (a sky ray, 2 n + 1),
+        or towards the sun and back up at the ground point (a ground ray, 2), and one
+        exponential per sample and wavelength."""
+        n = self.samples
+        return Operations(sky={"samples along the ray": n, "scale-function evaluations per constituent": 2 * n + 1},
+                          ground={"samples along the ray": n, "scale-function evaluations per constituent": 2})
 
     # --- per-ray scattering ----------------------------------------------------------------
 

@@ -68,8 +68,9 @@ import functools
 import numpy as np
 from colour.colorimetry import SDS_BASIS_FUNCTIONS_CIE_ILLUMINANT_D_SERIES
 
-from skyref.analytic.base import AnalyticModel
+from skyref.analytic.base import PER_VIEW_IN_LOOKUP, AnalyticModel
 from skyref.analytic.hosek import perez_f
+from skyref.sky_method import Operations
 from skyref.atmosphere.presets import turbidity as atmosphere_turbidity
 from skyref.validation import check_number
 from skyref.color import xyz_matrix
@@ -243,6 +244,14 @@ class Preetham1999(AnalyticModel):
             return zenith_value * perez_f(coefficients, mu, gamma) / perez_f(coefficients, 1.0, sun_zenith)
 
         return distribute(x_z, coefficients_x), distribute(y_z, coefficients_y), distribute(Y_z, coefficients_Y)
+
+    def operations(self) -> Operations:
+        """Per direction: the Perez function F for Y, x and y, and a CIE daylight spectrum
+        (S0 + M1 S1 + M2 S2 at the model's wavelengths, and on the basis's own 107-point grid for
+        its luminance: :meth:`_radiance` clips it before scaling it to Y); per view: the zenith
+        values and F(0, theta_s) of Y, x and y."""
+        return Operations(sky={"Perez F evaluations": 3, "daylight spectra": 1},
+                          per_view={"Perez F evaluations": 3, "zenith-value fits": 3}, note=PER_VIEW_IN_LOOKUP)
 
     def _radiance(self, r, mu, mu_s, nu):
         above = mu >= 0.0

@@ -16,6 +16,7 @@ import json
 from skyref.atmosphere import turbidity
 from skyref.audit.speed_map import FRAME_DIRECTIONS, KINDS, frame_seconds
 from skyref.errors import ParameterError
+from skyref.sky_method import describe_operations
 
 __all__ = ["COSTS_MEAN", "ENTRY_KEYS", "MAX_ALTITUDE_M", "MAX_SUN_ZENITH_DEG", "advice_lines", "load_map",
            "parse_tolerance", "rank", "scene_kind"]
@@ -108,15 +109,18 @@ def load_map(path: str) -> list[dict]:
 
 
 #: What the costs in the advice are (printed with it).
-COSTS_MEAN = ("costs: CPU seconds of skyref's own implementations on the machine that measured the map "
+COSTS_MEAN = ("costs: wall seconds of skyref's own implementations on the CPU that measured the map "
               "('skyref report'): a method's precomputation once, its per-view tables once per frame, its "
-              "lookups per direction; an engine on a GPU pays other costs, in the same proportions only roughly")
+              "lookups per direction (the last two warm: first-call kernel compilation excluded). An engine on "
+              "a GPU pays for what they count instead (table fetches per direction, per-view cells x samples), "
+              "in the same proportions only roughly")
 
 
 def _cost_text(c: dict, directions: int, frames: int) -> str:
-    return (f"{c['cost_s']:.3g} s for {frames} frame(s) of {directions:,} directions (precompute "
+    counted = f"; counts: {describe_operations(c['operations'])}" if c.get("operations") else ""
+    return (f"{c['cost_s']:.3g} s on the map's CPU for {frames} frame(s) of {directions:,} directions (precompute "
             f"{c['precompute_s']:.3g} s, per view {1e3 * c['per_view_s']:.3g} ms, "
-            f"{1e9 * c['lookup_s']:.3g} ns per direction)")
+            f"{1e9 * c['lookup_s']:.3g} ns per direction{counted})")
 
 
 def advice_lines(summaries, scene, tolerance: float, directions: int = FRAME_DIRECTIONS, frames: int = 1) -> list[str]:

@@ -3,7 +3,9 @@
 (``results/report/pareto.png``, every point labelled, no two labels overlapping), a contact
 sheet of the same skies by every method as sky domes with their error maps on a colour scale
 fitted to the data (``results/report/contact_sheet.png``) and the numbers ``skyref advise`` reads
-(``results/report/map.json``). Every number is computed by the code from the cached rows.
+(``results/report/map.json``); beside the costs, what they count (:func:`operations_table`), and
+the analytic models' scale and shape apart (:func:`analytic_scale_table`). Every number is
+computed by the code from the cached rows.
 """
 
 from __future__ import annotations
@@ -15,16 +17,18 @@ import platform
 
 import numpy as np
 
+from skyref.audit.metrics import SCALE_DEFINITION
 from skyref.audit.speed_map import FRAME_DIRECTIONS, KINDS, MAP_SKIES, cache_path, load_cached
 from skyref.color import default_exposure, spectral_to_linear_srgb, srgb_luminance, tonemap_srgb8
 from skyref.errors import ParameterError
 from skyref.io.atomic import atomic_path, atomic_write
 from skyref.io.exr import read_sky_exr
 from skyref.projection import equirectangular_pixel, fisheye_direction
+from skyref.sky_method import describe_operations
 
 __all__ = ["ERROR_LINEAR", "LABEL_DIRECTIONS", "LABEL_RINGS_PT", "MARKER_SIZE_PT", "OTHER_REPORTS", "PARETO_DPI",
-           "contact_entries", "contact_sheet_figure", "error_norm", "map_table", "pareto_figure",
-           "plot_contact_sheet", "plot_pareto", "sky_dome", "write_map_report"]
+           "analytic_scale_table", "contact_entries", "contact_sheet_figure", "error_norm", "map_table",
+           "operations_table", "pareto_figure", "plot_contact_sheet", "plot_pareto", "sky_dome", "write_map_report"]
 
 #: Relative luminance error within which the contact sheet's symmetric-log colour scale is linear.
 ERROR_LINEAR = 0.01
@@ -65,6 +69,35 @@ def map_table(summaries: list[dict]) -> list[str]:
                      f"{1e3 * s['per_view_s']:.3g} | {1e9 * s['lookup_s']:.3g} | {s['frame_s']:.3g} | "
                      + " | ".join(kinds) + f" | {s['delta_e_p95_median']:.2f} | "
                      f"{worst['region']} {100 * worst['rms']:.0f}% ({worst['sky']}) |")
+    return lines
+
+
+def operations_table(summaries: list[dict]) -> list[str]:
+    """Markdown rows: per measured entry, what its costs count
+    (:func:`skyref.sky_method.describe_operations`)."""
+    lines = ["| method | setting | what the costs count |", "|---|---|---|"]
+    for s in summaries:
+        if s.get("operations"):
+            lines.append(f"| {s['method']} | {s['label']} | {describe_operations(s['operations'])} |")
+    return lines
+
+
+def analytic_scale_table(summaries: list[dict]) -> list[str]:
+    """Markdown rows: per analytic entry and map sky, the sky luminance RMS error as it is ->
+    after the best scale factor s (in %; * where not resolved), and s; "refused" where the model
+    refuses the sky."""
+    lines = ["| method | setting | " + " | ".join(s.name for s in MAP_SKIES) + " |",
+             "|---|---|" + "---:|" * len(MAP_SKIES)]
+    for s in summaries:
+        if s["family"] != "analytic" or "scale" not in s:
+            continue
+        cells = []
+        for sky in MAP_SKIES:
+            scale = s["scale"].get(sky.name)
+            cells.append("refused" if sky.name in s["refused"] else "–" if scale is None else
+                         f"{_percent(scale['rms'], scale['resolved_rms'])} → "
+                         f"{_percent(scale['rms_scaled'], scale['resolved_rms_scaled'])} (s = {scale['factor']:.3g})")
+        lines.append(f"| {s['method']} | {s['label']} | " + " | ".join(cells) + " |")
     return lines
 
 
@@ -358,14 +391,26 @@ def write_map_report(entries, skies, rows, summaries, cache_dir: str, results_di
         "ground truth's noise exceeds 1/5 of the error (not resolved); `refused` where the model refuses the "
         "sky (outside its stated range; `(part)` if some skies of the kind were refused). CIEDE2000: median "
         "over skies of the 95th percentile (absolute basis). Worst region: the largest luminance RMS over "
-        "the sky's regions (horizon band, sun, anti-solar, away; not the ground) and skies. Analytic models "
-        "run in NumPy (float64, one CPU thread, not optimised), LUT lookups in Dr.Jit: their per-direction "
-        "times compare implementations here, not what a shader would take. Costs on this CPU for 17 "
-        "wavelengths: precompute once per atmosphere, per view when the sun or observer moves, lookup per "
-        f"direction; HD frame = precompute + per view + {FRAME_DIRECTIONS:,} lookups. The path tracer's "
-        "lookup is its render time per direction at that sample count; its error is its own noise.", "",
+        "the sky's regions (horizon band, sun, anti-solar, away; not the ground) and skies. Costs are wall "
+        "times of skyref's own implementations on this CPU for 17 wavelengths: analytic models in NumPy "
+        "(float64, one CPU thread, not optimised), LUT methods in Dr.Jit (LLVM, double precision); they "
+        "compare implementations here, not what a shader would take (see what they count, below). "
+        "Precompute once per atmosphere, per view when the sun or observer moves, lookup per direction, the "
+        "last two warm (first-call kernel compilation excluded); HD frame = precompute + per view + "
+        f"{FRAME_DIRECTIONS:,} lookups. The path tracer's lookup is its render time per direction at that "
+        "sample count; its error is its own noise.", "",
         *map_table(summaries), "",
+        "What the costs count, machine-independently (what an engine on a GPU pays for): table fetches per "
+        "view direction (one interpolated read of a table, every wavelength at once: bilinear in 2D, "
+        "trilinear in 3D), for a direction that misses the ground and one that meets it, and the per-view "
+        "work (cells x samples); the tables' cells per axis.", "",
+        *operations_table(summaries), "",
         "![speed against error](report/pareto.png)", "",
+        "## Analytic models: scale and shape", "",
+        "Per sky: the sky luminance RMS error as the model is (%) -> after multiplying it by the best "
+        f"single scale factor s, and s: {SCALE_DEFINITION}. An error that s removes is one of overall "
+        "brightness (the model's sun or calibration); what remains is one of shape and colour.", "",
+        *analytic_scale_table(summaries), "",
         "## Contact sheet", "",
         "The first sky of each kind by every method at its default setting, as the sky dome (upward fisheye: "
         "zenith in the centre, horizon on the circle, north up, east left; tone-mapped with the ground truth's "

@@ -18,6 +18,12 @@ the 95th percentile and the maximum of |error| (see :func:`_statistics`). Region
 RMS average the truth's noise down over many pixels; p95 and max do not, and are reported as
 noise-limited where they are. Pixels where the truth is black (space seen from orbit) carry no
 relative error.
+
+Scale and shape apart (:func:`scale_statistics`): a model can be right in shape and wrong in
+overall brightness (a published model whose sun or calibration differs from the ground truth's).
+Beside its luminance RMS error as it is, the audit reports the single factor s that best rescales
+it (:func:`best_scale`: least squares on radiance over the region's directions and every
+wavelength) and the luminance RMS error of s times the method.
 """
 
 from __future__ import annotations
@@ -29,8 +35,8 @@ import numpy as np
 from skyref.audit.regions import REGIONS
 from skyref.color import ciede2000, spectral_to_linear_srgb, xyz_matrix
 
-__all__ = ["DYNAMIC_RANGE", "MAX_PIXEL_NOISE", "METRICS", "NOISE_RATIO", "STATISTICS", "ErrorMaps", "error_maps",
-           "region_statistics"]
+__all__ = ["DYNAMIC_RANGE", "MAX_PIXEL_NOISE", "METRICS", "NOISE_RATIO", "SCALE_DEFINITION", "STATISTICS", "ErrorMaps",
+           "best_scale", "error_maps", "region_statistics", "scale_statistics"]
 
 METRICS = ("luminance", "spectral", "delta_e")
 STATISTICS = ("mean", "rms", "p95", "max")
@@ -43,6 +49,11 @@ DYNAMIC_RANGE = 1e-4
 #: statistics: a ratio to a noisier truth is biased and its noise estimate unreliable. Their
 #: number is reported (``unmeasured``); a region that loses most of its pixels is unresolved.
 MAX_PIXEL_NOISE = 0.2
+#: What :func:`scale_statistics` reports, in words (for the reports).
+SCALE_DEFINITION = ("s minimises sum (s L_method - L_truth)^2 over the sky's measured directions and every "
+                    "wavelength, each (direction, wavelength) weighing the same in radiance (W m^-2 sr^-1 nm^-1: "
+                    "the brightest directions and wavelengths weigh most); the RMS after it is the luminance RMS "
+                    "error of s x the method")
 
 
 @dataclass
@@ -132,3 +143,37 @@ def region_statistics(maps: ErrorMaps, masks: dict) -> dict:
             row[metric] = entry
         table[region] = row
     return table
+
+
+def best_scale(method_radiance, truth_radiance) -> float:
+    """The factor s minimising sum (s m - t)^2 over every value given (directions x wavelengths,
+    radiance in W m^-2 sr^-1 nm^-1): s = sum m t / sum m^2. Every (direction, wavelength) value
+    weighs the same in radiance, so the brightest directions and wavelengths weigh most. NaN if
+    the method is black everywhere."""
+    m = np.asarray(method_radiance, dtype=np.float64).ravel()
+    t = np.asarray(truth_radiance, dtype=np.float64).ravel()
+    power = float(m @ m)
+    return float(m @ t) / power if power > 0.0 else float("nan")
+
+
+def scale_statistics(maps: ErrorMaps, method_radiance, truth_radiance, mask) -> dict | None:
+    """Scale and shape apart over the measured pixels of ``mask`` (``maps.valid`` of it; the
+    radiances (H, W, N) as given to :func:`error_maps`): ``factor``, the :func:`best_scale` of
+    the method over those pixels and every wavelength; ``rms`` and ``rms_scaled``, the
+    noise-corrected luminance RMS error (see :func:`_statistics`) of the method as it is and of
+    factor x method, whose relative luminance error is s (1 + e) - 1 beside the same truth
+    noise; each with its ``noise_`` and ``resolved_`` (the noise at most 1/NOISE_RATIO of the
+    value). None without a measured pixel."""
+    keep = np.asarray(mask) & maps.valid
+    if not keep.any():
+        return None
+    m, t = np.asarray(method_radiance, dtype=np.float64)[keep], np.asarray(truth_radiance, dtype=np.float64)[keep]
+    both = np.isfinite(m) & np.isfinite(t)
+    factor = best_scale(m[both], t[both])
+    error, noise = maps.error["luminance"][keep], maps.noise["luminance"][keep]
+    result = {"factor": factor}
+    for key, e in (("rms", error), ("rms_scaled", factor * (1.0 + error) - 1.0)):
+        entry = _statistics(e, noise)
+        result.update({key: entry["rms"], f"noise_{key}": entry["noise_rms"],
+                       f"resolved_{key}": bool(entry["noise_rms"] * NOISE_RATIO <= entry["rms"])})
+    return result

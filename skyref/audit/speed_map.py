@@ -13,14 +13,21 @@ view that misses the ground, solar disk excluded), the 95th percentile of CIEDE2
 basis), and the worst region (horizon band, around the sun, anti-solar, away from both; the
 ground, which most analytic models do not model, is left out) by luminance RMS. A model that refuses a sky (outside its stated validity range) is marked so.
 
+**Scale and shape** per sky (analytic models above all): the best single scale factor of the
+method and its sky luminance RMS error after it (:func:`skyref.audit.metrics.scale_statistics`).
+
 **Cost**: precompute time (s, once per atmosphere), per-view time (s, tables rebuilt when the
-sun or observer moves), and lookup time per direction (s, warm), all on this machine's CPU with
-17 wavelengths. The path tracer's per-direction time is its render time at that sample count.
-The cost of a frame of ``n`` directions seen from scratch is precompute + per view + n x lookup
-(:func:`frame_seconds`).
+sun or observer moves), and lookup time per direction (s), the last two warm (first-call kernel
+compilation excluded, :func:`skyref.audit.audit.compare`), all wall times of skyref's own
+implementation on this machine's CPU with 17 wavelengths. Beside them, what they count
+(:class:`skyref.sky_method.Operations`: table fetches per direction, per-view cells x samples),
+which is what an engine on a GPU pays for. The path tracer's per-direction time is its render
+time at that sample count. The cost of a frame of ``n`` directions seen from scratch is
+precompute + per view + n x lookup (:func:`frame_seconds`).
 
 Rows are cached per (entry, sky) under ``out/report/cache`` (with linear sRGB images for the
-contact sheet), so the map is completed in pieces and rebuilt without recomputation.
+contact sheet), so the map is completed in pieces and rebuilt without recomputation; rows of an
+earlier :data:`CACHE_VERSION` are measured again.
 """
 
 from __future__ import annotations
@@ -42,15 +49,18 @@ from skyref.io.atomic import atomic_path
 from skyref.io.exr import read_sky_exr
 from skyref.lut import lut_method
 from skyref.render import render_sky
+from skyref.sky_method import Operations
 
-__all__ = ["ENTRIES", "FRAME_DIRECTIONS", "KINDS", "MAP_SKIES", "TRUTH_GRID", "Entry", "MapSky", "PathTracerView",
-           "build_method", "cache_path", "entry_summary", "evaluate_map", "fitted_entries", "frame_seconds",
-           "load_cached", "save_cached", "truth_skies"]
+__all__ = ["CACHE_VERSION", "ENTRIES", "FRAME_DIRECTIONS", "KINDS", "MAP_SKIES", "TRUTH_GRID", "Entry", "MapSky",
+           "PathTracerView", "build_method", "cache_path", "entry_summary", "evaluate_map", "fitted_entries",
+           "frame_seconds", "load_cached", "save_cached", "truth_skies"]
 
 #: Directions of the frame the map's "frame" cost refers to (1920 x 1080).
 FRAME_DIRECTIONS = 1920 * 1080
 #: Where the ground truth comes from.
 TRUTH_GRID = os.path.join("grids", "lut_audit.toml")
+#: Version of the cached rows: 2 added warm per-view times, operation counts and scale statistics.
+CACHE_VERSION = 2
 
 
 @dataclass(frozen=True)
@@ -83,7 +93,8 @@ class Entry:
     registry name (:data:`skyref.lut.METHODS`, :data:`skyref.analytic.MODELS`; "skyref" for the
     path tracer); ``options``: the method's own options (``spp`` for the path tracer;
     ``turbidity="clamp"`` clamps the atmosphere's turbidity into the model's range;
-    ``table=PATH`` reads a fitted coefficient table); ``stored_as``: options of
+    ``table=PATH`` reads a fitted coefficient table; ``solar_spectrum_correction`` rescales the
+    published Hosek–Wilkie sky to skyref's sun); ``stored_as``: options of
     Bruneton2017.stored_as applied to the tables of the same method without them."""
 
     method: str
@@ -114,7 +125,8 @@ ENTRIES = (Entry("skyref", "path tracer", "16 spp", {"spp": 16}),
            Entry("nielsen2003", "analytic", "default"),
            Entry("nishita1993", "analytic", "default"),
            Entry("oneil2005", "analytic", "default"),
-           Entry("hosek2012", "analytic", "published 1.4a"))
+           Entry("hosek2012", "analytic", "published 1.4a"),
+           Entry("hosek2012", "analytic", "published 1.4a, skyref's sun", {"solar_spectrum_correction": True}))
 
 
 def fitted_entries(coefficients_dir: str) -> list[Entry]:
@@ -159,6 +171,10 @@ class PathTracerView:
         self.spp, self.seed = spp, seed
         self.precompute_seconds = 0.0
 
+    def operations(self) -> Operations:
+        """Per direction: ``spp`` paths of the path tracer; nothing tabulated."""
+        return Operations(sky={"paths": self.spp}, ground={"paths": self.spp})
+
     def radiance(self, directions, sun_direction, observer_altitude_m: float) -> np.ndarray:
         expected = self.scene.camera.width * self.scene.camera.height
         if len(directions) != expected:
@@ -193,14 +209,14 @@ def _summary(found: dict) -> dict:
     for region, row in found["statistics"].items():
         statistics[region] = {"luminance_rms": row["luminance"]["rms"], "luminance_p95": row["luminance"]["p95"],
                               "resolved": row["luminance"]["resolved_rms"], "delta_e_p95": row["delta_e"]["p95"]}
-    return {"statistics": statistics, "per_view_s": found["per_view_s"],
-            "lookup_s": found["lookup_s_per_direction"]}
+    return {"statistics": statistics, "scale": found["scale"], "operations": found["operations"],
+            "per_view_s": found["per_view_s"], "lookup_s": found["lookup_s_per_direction"]}
 
 
 def cache_path(cache_dir: str, entry: Entry, sky: MapSky) -> str:
     """The cached row of ``entry`` on ``sky``; an entry that reads a coefficient table is keyed
     by the table's content too, so a refitted table is measured again."""
-    tag = f"{entry.key}__{sky.name}"
+    tag = f"v{CACHE_VERSION}__{entry.key}__{sky.name}"
     if "table" in entry.options:
         tag += "__" + sha256_of(entry.options["table"])[:12]
     safe = "".join(ch if ch.isalnum() else "_" for ch in tag)
@@ -280,10 +296,12 @@ def frame_seconds(row: dict, directions: int = FRAME_DIRECTIONS, frames: int = 1
 
 
 def entry_summary(rows: list[dict]) -> list[dict]:
-    """Per entry (in order of appearance): costs (medians over its skies), the worst sky
-    luminance RMS per kind of sky (None where every sky of the kind was refused; "resolved"
-    False if any measured value was not resolved; "partial" if some were refused), the median CIEDE2000 p95 and the worst
-    region of the sky (the ground excluded: most analytic models do not model it) over all skies."""
+    """Per entry (in order of appearance): costs (medians over its skies) and the operations they
+    count, the worst sky luminance RMS per kind of sky (None where every sky of the kind was
+    refused; "resolved" False if any measured value was not resolved; "partial" if some were
+    refused), the median CIEDE2000 p95, the worst region of the sky (the ground excluded: most
+    analytic models do not model it) over all skies, and the scale statistics of each measured
+    sky ("scale": sky name -> :func:`skyref.audit.metrics.scale_statistics`)."""
     order = list(dict.fromkeys(r["entry"] for r in rows))
     summaries = []
     for key in order:
@@ -306,6 +324,8 @@ def entry_summary(rows: list[dict]) -> list[dict]:
             worst = max(((region, s["luminance_rms"], r["sky"]) for r in measured
                          for region, s in r["statistics"].items() if region != "ground"), key=lambda t: t[1])
             summary["worst_region"] = {"region": worst[0], "rms": worst[1], "sky": worst[2]}
+            summary["operations"] = measured[0]["operations"]
+            summary["scale"] = {r["sky"]: r["scale"] for r in measured if r["scale"] is not None}
         summary["refused"] = sorted({r["sky"] for r in mine if "refused" in r})
         summaries.append(summary)
     return summaries

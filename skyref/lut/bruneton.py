@@ -106,6 +106,7 @@ from skyref.validation import check_choice, check_int, check_number
 from skyref.errors import ParameterError
 from skyref.lut import planet
 from skyref.lut.base import LutMethod
+from skyref.sky_method import Operations
 from skyref.lut.table import PRECISIONS, Table, channel_values, texture_coordinate, unit_range
 from skyref.lut.transmittance import TransmittanceTable
 from skyref.atmosphere.sun import SUN_ANGULAR_RADIUS_DEG
@@ -698,6 +699,24 @@ class Bruneton2017(LutMethod):
         if self.single_mie is not None:
             out["single_mie"] = self.single_mie.numpy()
         return out
+
+    def operations(self) -> Operations:
+        """Fetches per direction, from :meth:`_radiance`: the sky reads the scattering table (and
+        single Mie, unless combined) in the two nu slices around the view's nu (:meth:`_lookup`);
+        a ground view reads them at the viewer and at the ground point
+        (:meth:`sky_radiance_to_point`), the transmittance at both ends and towards the sun, and
+        the irradiance at the ground point. Nothing is rebuilt per view."""
+        mie = {} if self.combined_mie else {"single_mie": 2}
+        scattering = (self.r_size, self.mu_size, self.nu_size * self.mu_s_size)
+        tables = {"transmittance": (self.transmittance_height, self.transmittance_width), "scattering": scattering,
+                  **({} if self.combined_mie else {"single_mie": scattering}),
+                  "irradiance": (self.irradiance_height, self.irradiance_width)}
+        return Operations(
+            tables=tables,
+            sky={"scattering fetches": 2, **{f"{k} fetches": v for k, v in mie.items()}},
+            ground={"scattering fetches": 4, **{f"{k} fetches": 2 * v for k, v in mie.items()},
+                    "transmittance fetches": 3, "irradiance fetches": 1},
+            note="this implementation evaluates the sky and the ground terms for every direction")
 
     def stored_as(self, precision: str | None = None, combined_mie: bool | None = None) -> "Bruneton2017":
         """These tables stored differently, without precomputing again: ``precision`` "float16"

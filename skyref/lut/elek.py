@@ -118,6 +118,7 @@ from skyref.validation import check_choice, check_int, check_int_tuple
 from skyref.errors import ParameterError
 from skyref.lut import planet
 from skyref.lut.base import LutMethod
+from skyref.sky_method import Operations
 from skyref.lut.table import Table, texture_coordinate, unit_range
 from skyref.lut.transmittance import TransmittanceTable
 from skyref.atmosphere.sun import SUN_ANGULAR_RADIUS_DEG
@@ -398,6 +399,34 @@ class Elek2009(LutMethod):
                 "scattering_rayleigh": self.scattering_rayleigh.numpy(),
                 "scattering_mie": self.scattering_mie.numpy(),
                 "gathering": self.gathering.numpy()}
+
+    def operations(self) -> Operations:
+        """Fetches per direction, from :meth:`_radiance`: the sky reads the Rayleigh and Mie
+        tables once each; a ground view reads the transmittance towards the sun at the ground
+        point and, with the half table, the view's aerial-perspective volume (in-scattering and
+        transmittance), else both scattering tables at their ground half and the transmittance
+        at the ray's two ends. Per view (half table only): the volume, every cell an
+        ``integration_samples``-interval Simpson march that reads the transmittance towards the
+        sun and, with multiple scattering, the gathering table at every node."""
+        n_h, n_v, n_s = self.scattering_size
+        scattering = (n_h, n_v // 2 if self.half_table else n_v, n_s)
+        tables = {"transmittance": self.transmittance_size[::-1], "scattering_rayleigh": scattering,
+                  "scattering_mie": scattering}
+        sky = {"scattering_rayleigh fetches": 1, "scattering_mie fetches": 1}
+        if not self.half_table:
+            return Operations(tables=tables, sky=sky, ground={**sky, "transmittance fetches": 3})
+        gathered = self.scattering_orders > 1
+        if gathered:
+            tables["gathering"] = (n_h, n_s)
+        tables["aerial_perspective"] = self.aerial_perspective_size
+        nodes = self.integration_samples + 1
+        return Operations(
+            tables=tables, sky=sky,
+            ground={"transmittance fetches": 1, "aerial_perspective fetches (in-scattering, transmittance)": 2},
+            per_view={"aerial_perspective cells": int(np.prod(self.aerial_perspective_size)),
+                      "samples per cell": nodes, "transmittance fetches per sample": 1,
+                      **({"gathering fetches per sample": 1} if gathered else {})},
+            note="this implementation evaluates the sky and the ground terms for every direction")
 
     # --- lookups ------------------------------------------------------------------------------
 

@@ -97,6 +97,7 @@ from skyref.validation import check_array, check_int, check_int_tuple, check_num
 from skyref.errors import ParameterError
 from skyref.lut import planet
 from skyref.lut.base import LutMethod
+from skyref.sky_method import Operations
 from skyref.lut.table import Table, texture_coordinate, unit_range
 from skyref.lut.transmittance import TransmittanceTable
 from skyref.atmosphere.sun import SUN_ANGULAR_RADIUS_DEG
@@ -330,6 +331,35 @@ class Hillaire2020(LutMethod):
             altitude = r - self.optics.bottom_radius
             tables[f"sky_view(altitude_m={altitude:g}, mu_s={mu_s:.6g})"] = table.numpy()
         return tables
+
+    def operations(self) -> Operations:
+        """Fetches per direction of an observer inside the atmosphere, from :meth:`_radiance`:
+        the sky reads the sky view once (with ``ray_march_sky``, a march of at most
+        ``sky_view_samples[1]`` segments instead); a ground view adds the transmittance at both
+        ends of the ray and towards the sun at the ground point, and the multiple-scattering
+        table there. Per view: the sky view, every cell a march of ``sky_view_samples`` segments
+        (fewest to most, with the ray's length), each reading the transmittance towards the sun
+        and the multiple-scattering table (:meth:`_march`). An observer above the atmosphere
+        marches every direction."""
+        width, height = self.transmittance_size
+        tables = {"transmittance": (height, width)}
+        per_segment = {"transmittance fetches per segment": 1}
+        if self.multiple_scattering:
+            tables["multiple_scattering"] = self.multiple_scattering_size[::-1]
+            per_segment["multiple_scattering fetches per segment"] = 1
+        most = self.sky_view_samples[1]
+        if self.ray_march_sky:
+            sky = {"ray-march segments (at most)": most, **per_segment}
+            per_view = {}
+        else:
+            tables["sky_view"] = self.sky_view_size[::-1]
+            sky = {"sky_view fetches": 1}
+            per_view = {"sky_view cells": int(np.prod(self.sky_view_size)), "segments per cell (at most)": most,
+                        **per_segment}
+        ground = {**sky, "transmittance fetches": 3,
+                  **({"multiple_scattering fetches": 1} if self.multiple_scattering else {})}
+        return Operations(tables=tables, sky=sky, ground=ground, per_view=per_view,
+                          note="this implementation evaluates the ground term for every direction")
 
     # --- the ray march --------------------------------------------------------------------
 
