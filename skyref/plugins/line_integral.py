@@ -156,6 +156,15 @@ class LineIntegral:
         lit = [~((0.5 * (a + b) > t_in) & (0.5 * (a + b) < t_out)) for a, b in panels]
         return panels, lit
 
+    def _unit_depth(self, p, d, a, step):
+        """Optical depth per constituent at relative density 1 (m) from a to a + step along the
+        segment, by the rule on that interval (uniform in t: the density is smooth within a panel)."""
+        depth = [mi.Float(0.0) for _ in self.optics.components]
+        for u, w in zip(self.rule.nodes, self.rule.weights):
+            _, _, rho = self._densities(p, d, a + u * step)
+            depth = [q + (w * step) * r for q, r in zip(depth, rho)]
+        return depth
+
     def _densities(self, p, d, t):
         x = p + t * d
         h = self.geometry.altitude(x)
@@ -194,9 +203,15 @@ class LineIntegral:
             prefixes.append(list(prefix))
             mass = mi.Float(0.0)
             for j, (x, hx, rho) in enumerate(nodes):
-                # optical depth from the segment's start to this node, per constituent
-                tau = [prefix[c] + sum(rule.cumulative[j][m] * density_du[m][c] for m in range(rule.count))
-                       for c in range(len(components))]
+                # optical depth from the segment's start to this node, per constituent: for the
+                # sunlight, by the rule in t on [a, t_j] (the density is smooth in t; rho dt/du of
+                # an optically thick panel is not, and the cumulative matrix is exact only to
+                # degree n - 1); for the sampling proxy, by the cumulative matrix
+                if sunlight == "quadrature":
+                    tau = [q + r for q, r in zip(prefix, self._unit_depth(p, d, a, width * stretch[j][0]))]
+                else:
+                    tau = [prefix[c] + sum(rule.cumulative[j][m] * density_du[m][c] for m in range(rule.count))
+                           for c in range(len(components))]
                 weight = width * stretch[j][1] * rule.weights[j]
                 if sunlight == "quadrature":
                     tau_sun = self.sun_depth(hx, dr.dot(self.geometry.up(x), sun))
@@ -253,12 +268,7 @@ class LineIntegral:
         g, dg = panel_map(v)
         step = g * width
         t = a + step
-        # optical depth from the panel's start to t, by the rule on [a, t]
-        partial = [mi.Float(0.0) for _ in prefix]
-        for u, w in zip(self.rule.nodes, self.rule.weights):
-            _, _, rho = self._densities(p, d, a + u * step)
-            partial = [q + (w * step) * r for q, r in zip(partial, rho)]
-        tau = [q + r for q, r in zip(prefix, partial)]
+        tau = [q + r for q, r in zip(prefix, self._unit_depth(p, d, a, step))]
         x = p + t * d
         hx = self.geometry.altitude(x)
         parts, sigma_s, sigma_t = self.optics.local(channels, hx)
