@@ -16,7 +16,8 @@ Every optical depth is computed per constituent at relative density 1 and multip
 channel's coefficients, so the geometry is paid once for all wavelengths.
 
 The path then goes on from a *forced collision*: a point of the segment drawn with a density
-proportional to a grey proxy of sigma_s(t) T(0, t) (:class:`GreyProxy`; a panel by its quadrature mass, then a
+proportional to a grey proxy of sigma_s(t) T(0, t) (:class:`GreyProxy`; a panel by its quadrature
+mass, then a
 point uniform in the panel's variable u), weighted by the exact sigma_s(t) T(0, t) / pdf(t) per channel — or, if the
 segment ends on the ground, from the ground with probability proportional to its grey
 T(0, L) x albedo. Every path scatters: none is wasted on light that leaves the atmosphere.
@@ -41,7 +42,8 @@ import mitsuba as mi
 from skyref.plugins.drjit_namespace import xp
 from skyref.plugins.quadrature import NODES_PER_PANEL, GaussLegendreRule, insert_sorted, ordered_breakpoints
 
-__all__ = ["PANEL_THICKNESS", "OPTICAL_DEPTH_BREAKS", "grey_sum", "GreyProxy", "PanelMap", "SegmentQuadrature", "LineIntegral"]
+__all__ = ["PANEL_THICKNESS", "OPTICAL_DEPTH_BREAKS", "grey_sum", "GreyProxy", "PanelMap", "SegmentQuadrature",
+           "LineIntegral"]
 
 #: Optical thickness (most transparent channel) above which a panel's nodes are spaced evenly
 #: in that channel's transmittance.
