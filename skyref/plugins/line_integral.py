@@ -16,11 +16,10 @@ Every optical depth is computed per constituent at relative density 1 and multip
 channel's coefficients, so the geometry is paid once for all wavelengths.
 
 The path then goes on from a *forced collision*: a point of the segment drawn with a density
-proportional to a grey proxy of sigma_s(t) T(0, t) (:class:`GreyProxy`; a panel by its quadrature
-mass, then a
-point uniform in the panel's variable u), weighted by the exact sigma_s(t) T(0, t) / pdf(t) per channel — or, if the
-segment ends on the ground, from the ground with probability proportional to its grey
-T(0, L) x albedo. Every path scatters: none is wasted on light that leaves the atmosphere.
+proportional to a grey proxy of sigma_s(t) T(0, t) (:class:`GreyProxy`; a panel by its
+quadrature mass, then a point uniform in the panel's variable u), weighted by the exact
+sigma_s(t) T(0, t) / pdf(t) per channel — or, if the segment ends on the ground, from the ground
+with probability proportional to its grey T(0, L) x albedo. Every path scatters: none is wasted on light that leaves the atmosphere.
 
 On segments after the camera's, S is *sampled* instead (:meth:`LineIntegral.sampled_sunlight`):
 a few stratified points drawn like the forced collision, but by the lit panels' masses only, each
