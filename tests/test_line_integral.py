@@ -286,8 +286,9 @@ def single_scattering_reference(atmosphere, sun_direction, altitude_m, direction
     depth = np.stack([np.interp(t, fine, depth[:, k]) for k in range(len(WL))], axis=1)
     h = altitude(t)
     mu_sun = ((start + t[:, None] * d) @ s) / (R + h)
+    scatterers = [c for c in atmosphere.constituents if c.phase is not None]
     source = sum(c.scattering_coefficient(np.array(WL))[None, :] * c.profile.density(h)[:, None]
-                 * float(c.phase.evaluate(np.array([d @ s]))[0]) for c in atmosphere.constituents if c.phase is not None)
+                 * float(c.phase.evaluate(np.array([d @ s]))[0]) for c in scatterers)
     in_shadow = (mu_sun < 0.0) & ((R + h) ** 2 * (1.0 - mu_sun ** 2) < R * R)
     sunlight = np.array([np.zeros(len(WL)) if dark else np.exp(-atmosphere.optical_depth(WL, hi, mi_, nodes=64))
                          for hi, mi_, dark in zip(h, mu_sun, in_shadow)])

@@ -12,9 +12,10 @@ so that every path scatters; on the path's later segments the scattered sunlight
 sun lookup each, where the quadrature pays one per node), so orders >= 2 stay unbiased Monte
 Carlo, drawn from scrambled Sobol points (:mod:`skyref.plugins.sobol`), with a sun lobe among
 the scattering directions where there is aerosol. For a fixed camera direction the camera
-segment's light is traced apart, once per few paths. Its quadrature is within 1e-4 of a refined one on clear skies
-up to the horizon, not yet on optically thick horizons (hazy: 3e-4) or at twilight (9e-4); see
-``results/groundtruth_speed.md`` for its speed and ``docs/design.md`` for why it is built so.
+segment's light is traced apart, once per few paths. Its quadrature is within 1e-4 of a refined
+one on clear skies up to the horizon, not yet on optically thick horizons (hazy: 3e-4) or at
+twilight (9e-4); see ``results/groundtruth_speed.md`` for its speed and ``docs/design.md`` for
+why it is built so.
 Scenes with objects use delta tracking.
 
 The delta-tracking estimator, per camera sample:

@@ -19,7 +19,8 @@ The path then goes on from a *forced collision*: a point of the segment drawn wi
 proportional to a grey proxy of sigma_s(t) T(0, t) (:class:`GreyProxy`; a panel by its
 quadrature mass, then a point uniform in the panel's variable u), weighted by the exact
 sigma_s(t) T(0, t) / pdf(t) per channel — or, if the segment ends on the ground, from the ground
-with probability proportional to its grey T(0, L) x albedo. Every path scatters: none is wasted on light that leaves the atmosphere.
+with probability proportional to its grey T(0, L) x albedo. Every path scatters: none is wasted
+on light that leaves the atmosphere.
 
 On segments after the camera's, S is *sampled* instead (:meth:`LineIntegral.sampled_sunlight`):
 a few stratified points drawn like the forced collision, but by the lit panels' masses only, each
@@ -176,8 +177,9 @@ class LineIntegral:
     def integrate(self, channels, p, d, h, length, sun, grey, rising_only=False, sunlight="quadrature"):
         """Single-scattered sunlight along the segment per channel (ArrayXf, to be multiplied by
         E_sun), its transmittance T(0, L) per channel, and the :class:`SegmentQuadrature`.
-        ``grey``: the path's :class:`GreyProxy`, for the forced collision's proxy. ``rising_only``: the caller
-        guarantees the segment never descends (a ray leaving the ground). ``sunlight``:
+        ``grey``: the path's :class:`GreyProxy`, for the forced collision's proxy.
+        ``rising_only``: the caller guarantees the segment never descends (a ray leaving the
+        ground). ``sunlight``:
         ``"quadrature"`` integrates it here; ``"sampled"`` only splits the panels at the
         shadow and keeps their lit masses, for :meth:`sampled_sunlight`; None builds the
         quadrature alone (for a forced collision whose single scattering is counted elsewhere).
