@@ -57,10 +57,10 @@ def sensor_dict(camera) -> dict:
 
 
 def build_integrator(scene, geometry: str = "spherical", wavelengths_per_path: int = 0,
-                     estimator: str | None = None):
+                     estimator: str | None = None, polarized: bool = False):
     """An ``atmosphere`` integrator configured for ``scene`` (Mitsuba must be loaded), with the
     ``estimator`` ``delta_tracking`` or ``line_integral`` (experimental; default: the
-    integrator's ``DEFAULT_ESTIMATOR``)."""
+    integrator's ``DEFAULT_ESTIMATOR``), transporting Stokes vectors if ``polarized``."""
     import mitsuba as mi  # lazy: Mitsuba and its plugins are loaded by skyref.plugins.load_mitsuba
 
     from skyref.plugins.integrator import AtmosphereIntegrator
@@ -69,7 +69,7 @@ def build_integrator(scene, geometry: str = "spherical", wavelengths_per_path: i
     integrator.configure(scene.atmosphere, scene.wavelengths_nm, scene.sun.zenith_deg, scene.sun.azimuth_deg,
                          scene.sun.angular_radius_deg, scene.sun.limb_darkening, scene.observer.altitude_m,
                          geometry=geometry, max_depth=scene.render.max_depth,
-                         wavelengths_per_path=wavelengths_per_path,
+                         wavelengths_per_path=wavelengths_per_path, polarized=polarized,
                          **({} if estimator is None else {"estimator": estimator}))
     return integrator
 

@@ -71,18 +71,24 @@ class Constituent:
 class Rayleigh(Constituent):
     """Molecular (Rayleigh) scattering; no absorption. ``scattering`` is the sea-level
     coefficient spectrum (default 1.24062e-6 m^-1 (lambda / 1 um)^-4); ``density_scale``
-    multiplies it (surface pressure relative to the standard one)."""
+    multiplies it (surface pressure relative to the standard one). ``depolarization`` is the
+    molecules' depolarization factor (:class:`~skyref.atmosphere.phase.RayleighPhase`; 0, the
+    presets' published value, or e.g. 0.0279 for air): it shapes the phase function, not the
+    coefficient, which is given as a whole."""
 
     name: str = "rayleigh"
     profile: DensityProfile = ExponentialProfile(8000.0)
     scattering: Spectrum = PowerLawSpectrum(RAYLEIGH_SCATTERING_AT_1UM, -4.0)
     density_scale: float = 1.0
+    depolarization: float = 0.0
     phase: PhaseFunction = field(default=RayleighPhase(), init=False)
     kind = "rayleigh"
 
     def __post_init__(self):
         _check_name(self.name)
         object.__setattr__(self, "scattering", as_spectrum(self.scattering))
+        check_number("rayleigh.depolarization", self.depolarization, 0.0, 1.0, hi_open=True)
+        object.__setattr__(self, "phase", RayleighPhase(self.depolarization))
         check_number("rayleigh.density_scale", self.density_scale, 0.0, MAX_DENSITY_SCALE)
 
     def scattering_coefficient(self, wavelengths_nm):
@@ -90,7 +96,8 @@ class Rayleigh(Constituent):
 
     def to_dict(self):
         return {"kind": self.kind, "name": self.name, "profile": self.profile.to_dict(),
-                "scattering": self.scattering.to_dict(), "density_scale": self.density_scale}
+                "scattering": self.scattering.to_dict(), "density_scale": self.density_scale,
+                **({"depolarization": self.depolarization} if self.depolarization else {})}
 
 
 @dataclass(frozen=True)

@@ -15,8 +15,13 @@ Keyword arguments override the function's own parameters with arrays of the name
 as a Dr.Jit value, so that gradients with respect to it flow; a tabulated function's
 ``cosines`` and ``values`` as device tables).
 
+- ``matrix(mu, xp)``: the elements of its phase matrix, for polarized transport.
+
 References
 ----------
+J. E. Hansen and L. D. Travis, "Light scattering in planetary atmospheres", Space Sci. Rev.
+16 (1974) (the Rayleigh phase matrix with depolarization).
+
 L. G. Henyey and J. L. Greenstein, "Diffuse radiation in the Galaxy", ApJ 93 (1941).
 
 W. M. Cornette and J. G. Shanks, "Physically reasonable analytic expression for the
@@ -104,31 +109,73 @@ class PhaseFunction:
     def pdf(self, mu, xp=np, g=None):
         return henyey_greenstein_phase(mu, self.sampling_g if g is None else g, xp)
 
+    def matrix(self, mu, xp=np, **parameters):
+        """The phase matrix's independent elements (P11, P12, P22, P33, P34, P44), sr^-1, for
+        Stokes vectors referred to the scattering plane (module docstring of
+        :mod:`skyref.plugins.polarization`):
+        [[P11 P12 0 0] [P12 P22 0 0] [0 0 P33 P34] [0 0 -P34 P44]]. This base version is for
+        functions known by P11 alone (Cornette–Shanks, Henyey–Greenstein, a tabulated p): the
+        light they scatter is unpolarized, whatever came in."""
+        zero = 0.0 * mu
+        return self.evaluate(mu, xp, **parameters), zero, zero, zero, zero, zero
+
     def to_dict(self) -> dict:
         raise NotImplementedError
 
 
 @dataclass(frozen=True)
 class RayleighPhase(PhaseFunction):
-    """The Rayleigh phase function (scalar transport: polarisation is neglected)."""
+    """Rayleigh scattering by air molecules, with the molecules' anisotropy as a depolarization
+    factor ``depolarization`` (rho in [0, 1); the King correction's 0.0279 is a common air
+    value, 0 the ideal dipole that skyref's presets use as published).
 
+    After Hansen & Travis (1974, eq. 2.15) the phase matrix is Delta x the ideal dipole's plus
+    (1 - Delta) x an isotropic, unpolarized part (P11 only), Delta = (1 - rho) / (1 + rho / 2),
+    and the circular element P44 carries a further Delta' = (1 - 2 rho) / (1 - rho); so
+    p(mu) = Delta 3/(16 pi) (1 + mu^2) + (1 - Delta) / (4 pi). Its sampling is exact: the dipole
+    part with probability Delta, a uniform direction otherwise."""
+
+    depolarization: float = 0.0
     kind = "rayleigh"
 
+    def __post_init__(self):
+        check_number("depolarization", self.depolarization, 0.0, 1.0, hi_open=True)
+
+    @property
+    def dipole_share(self) -> float:
+        """Delta: the ideal dipole's share of the phase function."""
+        rho = self.depolarization
+        return (1.0 - rho) / (1.0 + 0.5 * rho)
+
     def evaluate(self, mu, xp=np):
-        return rayleigh_phase(mu, xp)
+        share = self.dipole_share
+        if share == 1.0:
+            return rayleigh_phase(mu, xp)
+        return share * rayleigh_phase(mu, xp) + (1.0 - share) * INV_4PI
+
+    def matrix(self, mu, xp=np):
+        rho = self.depolarization
+        dipole = (3.0 / (16.0 * math.pi)) * self.dipole_share
+        circular = (3.0 / (16.0 * math.pi)) * (1.0 - 2.0 * rho) / (1.0 + 0.5 * rho)    # Delta x Delta'
+        return (self.evaluate(mu, xp), dipole * (mu * mu - 1.0), dipole * (1.0 + mu * mu), dipole * 2.0 * mu,
+                0.0 * mu, circular * 2.0 * mu)
 
     def sample_cosine(self, u, xp=np):
-        return sample_rayleigh_cosine(u, xp)
+        share = self.dipole_share
+        if share == 1.0:
+            return sample_rayleigh_cosine(u, xp)
+        dipole = sample_rayleigh_cosine(xp.minimum(u / share, 1.0), xp)
+        return xp.where(u < share, dipole, xp.clip(2.0 * (u - share) / (1.0 - share) - 1.0, -1.0, 1.0))
 
     def pdf(self, mu, xp=np):
-        return rayleigh_phase(mu, xp)
+        return self.evaluate(mu, xp)
 
     @property
     def asymmetry(self) -> float:
         return 0.0
 
     def to_dict(self):
-        return {"type": self.kind}
+        return {"type": self.kind, **({"depolarization": self.depolarization} if self.depolarization else {})}
 
 
 @dataclass(frozen=True)

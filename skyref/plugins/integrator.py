@@ -91,6 +91,7 @@ from skyref.plugins.drjit_namespace import xp
 from skyref.plugins.geometry import PlaneParallelSlab, SphericalShell
 from skyref.plugins.line_integral import GreyProxy, LineIntegral
 from skyref.plugins.optics import AtmosphereOptics, atmosphere_from_property, direction_with_cosine
+from skyref.plugins.polarization import STOKES, StokesPath, stokes_times, unpolarized
 from skyref.plugins.quadrature import panel_levels
 from skyref.plugins.sobol import ScrambledSobolSampler, hash_combine
 from skyref.plugins.sun_optical_depth import SunOpticalDepth
@@ -185,8 +186,14 @@ class RadianceByOrder:
         self.direct, self.single, self.double, self.higher = direct, single, double, higher
 
     @staticmethod
-    def zeros(channels):
-        return RadianceByOrder(channels.zeros(), channels.zeros(), channels.zeros(), channels.zeros())
+    def zeros(channels: int, stokes: int = 1):
+        """Nothing gathered yet: K ``channels`` values for the solar disk (unpolarized), and
+        ``stokes`` x K for each scattering order (radiance, or I, Q, U, V)."""
+        def zero(size):
+            return mi.ArrayXf([mi.Float(0.0)] * size)
+
+        return RadianceByOrder(zero(channels), zero(stokes * channels), zero(stokes * channels),
+                               zero(stokes * channels))
 
     def file(self, order, light, active):
         """Add ``light`` under scattering order ``order`` (1, 2, or 3 and more) where ``active``."""
@@ -268,7 +275,8 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
     default ``bruneton2017``), ``wavelengths`` (string: comma-separated nm, or ``rgb``),
     ``sun_zenith``/``sun_azimuth`` (degrees), ``sun_angular_radius`` (degrees),
     ``limb_darkening`` (bool), ``observer_altitude`` (m), ``geometry`` (``spherical`` or
-    ``plane_parallel``), ``max_depth`` (int), ``wavelengths_per_path`` (int, default: all N; fewer
+    ``plane_parallel``), ``polarized`` (bool: Stokes vectors, :mod:`skyref.plugins.polarization`;
+    delta tracking only), ``max_depth`` (int), ``wavelengths_per_path`` (int, default: all N; fewer
     channels per path are cheaper per sample but noisier per wavelength — on the 48-wavelength
     default sky, carrying all of them was 3x more efficient than 16).
 
@@ -288,14 +296,22 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
                        geometry=props.get("geometry", "spherical"),
                        max_depth=props.get("max_depth", 64),
                        wavelengths_per_path=props.get("wavelengths_per_path", 0),
-                       estimator=props.get("estimator", DEFAULT_ESTIMATOR))
+                       estimator=props.get("estimator", DEFAULT_ESTIMATOR),
+                       polarized=props.get("polarized", False))
 
     def configure(self, atmosphere, wavelengths_nm, sun_zenith_deg, sun_azimuth_deg,
                   sun_angular_radius_deg, limb_darkening=False, observer_altitude_m=0.0,
-                  geometry="spherical", max_depth=64, wavelengths_per_path=0, estimator=DEFAULT_ESTIMATOR):
+                  geometry="spherical", max_depth=64, wavelengths_per_path=0, estimator=DEFAULT_ESTIMATOR,
+                  polarized=False):
         """Set the atmosphere, wavelength grid (nm), sun, observer and estimator settings."""
         check_choice("geometry", geometry, ("spherical", "plane_parallel"))
         self.estimator = check_choice("estimator", estimator, ESTIMATORS)
+        self.polarized = bool(check_choice("polarized", polarized, (False, True)))
+        if self.polarized and self.estimator != "delta_tracking":
+            raise ParameterError("estimator", self.estimator, "'delta_tracking' when polarized",
+                                 "the line-integral estimator transports radiance only (scalar)")
+        #: Values per channel in every output: the Stokes components I, Q, U, V, or radiance.
+        self.stokes = len(STOKES) if self.polarized else 1
         self.optics = AtmosphereOptics(atmosphere, wavelengths_nm)
         self.wavelengths_nm = self.optics.wavelengths_nm
         n = len(self.wavelengths_nm)
@@ -361,9 +377,9 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         "rgb" grid (channels 680/550/440 nm become R, G, B). skyref itself renders any
         wavelength grid through :meth:`render_orders`. The scene's shapes, if any, are the
         objects (:meth:`scene_objects`) of this render."""
-        if dr.size_v(mi.Spectrum) != 3 or len(self.wavelengths_nm) != 3:
+        if dr.size_v(mi.Spectrum) != 3 or len(self.wavelengths_nm) != 3 or self.polarized:
             raise RuntimeError("the atmosphere integrator renders through mi.render only in RGB "
-                               "variants with wavelengths='rgb'; use skyref.render_sky otherwise")
+                               "variants with wavelengths='rgb', unpolarized; use skyref.render_sky otherwise")
         indices = [mi.UInt32(i) for i in range(3)]
         objects = self.objects
         self.objects = self.scene_objects(scene) if scene is not None and scene.shapes() else objects
@@ -439,7 +455,8 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         return self._tensor(image, batches, (directions.shape[0],))
 
     def _tensor(self, image, batches, shape):
-        shape = (*shape, len(ORDER_NAMES), len(self.wavelengths_nm))
+        stokes = (self.stokes,) if self.polarized else ()
+        shape = (*shape, len(ORDER_NAMES), *stokes, len(self.wavelengths_nm))
         return mi.TensorXf(image, ((batches,) if batches > 1 else ()) + shape)
 
     def directional_derivative(self, directions, parameter: str, seed: int, spp: int):
@@ -501,7 +518,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         at most MAX_LANE_VALUES per-sample values (4 orders x N wavelengths each)."""
         lanes = targets * batches
         step = max(1, min(spp, MAX_WAVEFRONT // lanes,
-                          MAX_LANE_VALUES // (lanes * len(ORDER_NAMES) * len(self.wavelengths_nm))))
+                          MAX_LANE_VALUES // (lanes * len(ORDER_NAMES) * self.stokes * len(self.wavelengths_nm))))
         return [min(step, spp - done) for done in range(0, spp, step)]
 
     def _launches(self, seed, targets, spp, batches, camera_rays, orders, progress=None):
@@ -538,7 +555,8 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             indices = [(first + k * stride) % n for k in range(self.channels)]
         contributions = self.trace(sampler, mi.Point3f(origin), mi.Vector3f(direction), indices, valid, orders)
         scale = dr.opaque(mi.Float, n / (self.channels * spp))
-        image = dr.zeros(mi.Float, batches * targets * len(ORDER_NAMES) * n)
+        values_per_order = self.stokes * n                    # (Stokes component, wavelength)
+        image = dr.zeros(mi.Float, batches * targets * len(ORDER_NAMES) * values_per_order)
         if self.channels == n:
             # Each target's samples are contiguous lanes (batch, target, sample): sum them block by
             # block, in a fixed order, into the (batch, target, order, channel) layout.
@@ -548,11 +566,12 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             for order, per_channel in enumerate(values):
                 for k, value in enumerate(per_channel):
                     dr.scatter(image, dr.block_sum(value, spp, mode="evaluated"),
-                               (group * len(ORDER_NAMES) + order) * n + k)
+                               (group * len(ORDER_NAMES) + order) * values_per_order + k)
             return image
         for order, contribution in enumerate(contributions):
-            for k, index in enumerate(indices):
-                slot = ((batch * targets + target) * len(ORDER_NAMES) + order) * n + index
+            for k, index in enumerate(indices * self.stokes):
+                component = k // self.channels
+                slot = ((batch * targets + target) * len(ORDER_NAMES) + order) * values_per_order + component * n + index
                 # A fixed reduction mode: "Auto" picks one by the buffer's size, and each new
                 # choice compiles the whole path tracer again.
                 dr.scatter_reduce(dr.ReduceOp.Add, image, contribution[k] * scale, slot, valid,
@@ -638,7 +657,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         e_sun = self.sun.channel_irradiance(indices)
         d = mi.Vector3f(direction)
         p, h, misses = self._enter_atmosphere(origin, d, active)
-        radiance = RadianceByOrder.zeros(channels)
+        radiance = RadianceByOrder.zeros(channels.count)
         if orders != "multiple":
             radiance.direct = dr.select(misses, e_sun * self._solar_disk(d), radiance.direct)
         camera = PathVertex(p, h, d, channels.zeros() + 1.0, mi.UInt32(0), mi.Bool(active) & ~misses)
@@ -764,17 +783,20 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         geometry, optics, sun = self.geometry, self.optics, self.sun
         channels = optics.channel_coefficients(indices)
         e_sun = sun.channel_irradiance(indices)
-        radiance = RadianceByOrder.zeros(channels)
+        polarized = self.polarized
+        radiance = RadianceByOrder.zeros(channels.count, self.stokes)
 
         # -- the camera ray; an observer above the atmosphere first moves to where it enters ------
         d = mi.Vector3f(direction)
         p, h, misses = self._enter_atmosphere(origin, d, active)
         radiance.direct = dr.select(misses, e_sun * self._solar_disk(d), radiance.direct)
+        # Polarized: the path's Mueller matrix (w N, polarization.py) starts in the camera's frame.
+        stokes = StokesPath.camera(d, geometry.up(mi.Point3f(origin)), channels.count) if polarized else None
 
         path = PathVertex(p, h, d, channels.zeros() + 1.0, mi.UInt32(0), mi.Bool(active) & ~misses)
         segment = self._segment(p, d, h)
         shadow = ShadowRay(mi.Bool(False), mi.Point3f(p), mi.Float(h), mi.Vector3f(d), mi.Float(0.0),
-                           channels.zeros(), channels.zeros(), mi.UInt32(0))
+                           channels.zeros(), radiance.single, mi.UInt32(0))
 
         while dr.hint(path.alive | shadow.active, label="atmosphere path"):
             # -- one tracking step along the current ray (the shadow ray if one is in flight) ----
@@ -822,7 +844,9 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             shadow.altitude = dr.select(shadow_moves, hx, shadow.altitude)
             shadow.remaining = dr.select(shadow_moves, shadow.remaining - t, shadow.remaining)
             shadow_done = in_shadow & ((~collides & ~stretch_done) | (dr.max(shadow.transmittance, axis=0) <= 0.0))
-            radiance.file(shadow.order, shadow.pending * shadow.transmittance, shadow_done)
+            arriving = (stokes_times(shadow.pending, shadow.transmittance) if dr.hint(polarized, mode="scalar")
+                        else shadow.pending * shadow.transmittance)
+            radiance.file(shadow.order, arriving, shadow_done)
             tracking_path = path.alive & ~in_shadow
             shadow.active = in_shadow & ~shadow_done
 
@@ -837,8 +861,12 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             # the real-scattering branch: P_s * (w sigma_s / (mu P_s)) = w sigma_s / mu, with mu
             # the candidates' rate. The event decision below then only decides how the path goes on.
             sun_direction, sun_factor = sun.sample_direction(sampler.next_2d())
-            scattered_sunlight = (path.throughput * optics.phase(parts, sigma_s, dr.dot(path.direction, sun_direction))
-                                  * (sigma_s / rate))
+            cos_sun = dr.dot(path.direction, sun_direction)
+            if dr.hint(polarized, mode="scalar"):
+                phase_sun, reduced_sun = optics.phase_matrix(parts, sigma_s, cos_sun)
+            else:
+                phase_sun = optics.phase(parts, sigma_s, cos_sun)
+            scattered_sunlight = path.throughput * phase_sun * (sigma_s / rate)
             collides = candidate & (sampler.next_1d() * rate < majorant)
             null_weight = dr.maximum(majorant - sigma_t, 0.0)
             a_scatter = dr.max(dr.detach(path.throughput * sigma_s), axis=0)
@@ -870,6 +898,12 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             estimate = candidate | on_ground
             sunlight = dr.select(on_ground, reflected_sunlight, scattered_sunlight) * e_sun * sun_factor
             estimate &= dr.max(dr.detach(sunlight), axis=0) > 0.0   # nothing to connect: no shadow ray
+            if dr.hint(polarized, mode="scalar"):
+                # the sunlight's Stokes vectors at the camera per unit w: scattered by the air's
+                # phase matrix, or reflected unpolarized by the ground
+                sunlight = stokes_times(dr.select(on_ground, stokes.unpolarized_source(),
+                                                  stokes.scattered_source(sun_direction, path.direction, reduced_sun)),
+                                        sunlight)
             visible = estimate & (geometry.distance_to_ground(path.point, sun_direction, path.altitude) == dr.inf)
             if dr.hint(self.objects is not None, mode="scalar"):
                 visible &= ~self.objects.ray_test(mi.Ray3f(path.point, sun_direction), visible)
@@ -891,7 +925,14 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             mu, pdf = optics.sample_phase(parts, sigma_s, u_component, u_direction.x)
             d_air = direction_with_cosine(path.direction, mu, u_direction.y)
             d_ground = mi.Frame3f(up).to_world(mi.warp.square_to_cosine_hemisphere(u_direction))
-            throughput = dr.select(scatters, path.throughput * optics.phase(parts, sigma_s, mu) / pdf, path.throughput)
+            if dr.hint(polarized, mode="scalar"):
+                phase, reduced = optics.phase_matrix(parts, sigma_s, mu)
+                stokes, factor = stokes.scatter(d_air, path.direction, reduced, scatters)
+                stokes = stokes.reflect(on_ground)
+                phase = phase * factor
+            else:
+                phase = optics.phase(parts, sigma_s, mu)
+            throughput = dr.select(scatters, path.throughput * phase / pdf, path.throughput)
             path.throughput = dr.select(on_ground, throughput * albedo, throughput)
             path.direction = dr.select(scatters, d_air, dr.select(on_ground, d_ground, path.direction))
             segment = dr.select(vertex, self._segment(path.point, path.direction, path.altitude), segment)
@@ -904,7 +945,9 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             path.alive &= ~(roulette & ~survives)
             path.alive &= (path.depth < self.max_depth) & (dr.max(path.throughput, axis=0) > 0.0)
 
-        return radiance.by_order()
+        orders = radiance.by_order()
+        # the solar disk seen through the atmosphere is unpolarized
+        return [unpolarized(orders[0]), *orders[1:]] if polarized else orders
 
 
 def register():

@@ -118,6 +118,11 @@ class ConstituentOptics:
         """p(mu), sr^-1, mu = cosine between incident and scattered propagation directions."""
         return self.model.phase.evaluate(mu, xp, **self.phase_parameters())
 
+    def phase_matrix(self, mu):
+        """The phase matrix's elements (P11, P12, P22, P33, P34, P44), sr^-1
+        (:meth:`skyref.atmosphere.phase.PhaseFunction.matrix`)."""
+        return self.model.phase.matrix(mu, xp, **self.phase_parameters())
+
     def sample_cosine(self, u):
         """Sample mu from this component's sampling density; return (mu, pdf(mu) in sr^-1)."""
         mu = self.model.phase.sample_cosine(u, xp, **self.sampling_parameters())
@@ -222,6 +227,17 @@ class AtmosphereOptics:
             if part is not None:
                 total = total + part * c.phase(mu)
         return total / dr.maximum(sigma_s, 1e-30)
+
+    def phase_matrix(self, sigma_s_parts, sigma_s, mu):
+        """The local mixture's phase matrix per channel: (p, reduced), p as :meth:`phase` and
+        ``reduced`` the elements (P12, P22, P33, P34, P44) of the mixture divided by its P11
+        (ArrayXf each; :mod:`skyref.plugins.polarization`)."""
+        totals = [0.0 * sigma_s for _ in range(6)]
+        for c, part in zip(self.components, sigma_s_parts):
+            if part is not None:
+                totals = [total + part * element for total, element in zip(totals, c.phase_matrix(mu))]
+        inverse = dr.rcp(dr.maximum(totals[0], 1e-30))
+        return totals[0] / dr.maximum(sigma_s, 1e-30), [total * inverse for total in totals[1:]]
 
     def _sampling_mixture(self, sigma_s_parts, sigma_s):
         """The scattering components and their selection probabilities P_i = mean over

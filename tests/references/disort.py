@@ -111,6 +111,7 @@ def _legendre_moments(phase, n_moments: int, n_nodes: int) -> np.ndarray:
     if isinstance(phase, RayleighPhase):
         k = min(len(RAYLEIGH_MOMENTS), n_moments + 1)
         out[:k] = RAYLEIGH_MOMENTS[:k]
+        out[2:k] *= phase.dipole_share           # the depolarized part is isotropic
         return out
     mu, w = _gauss_legendre(n_nodes)
     evaluate = phase.evaluate if isinstance(phase, PhaseFunction) else phase
