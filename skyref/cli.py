@@ -35,10 +35,12 @@ from skyref.invert.cli import add_invert_parser
 from skyref.io.annotate import check_annotatable
 from skyref.io.exr import LAYERS, check_layers, write_sky_exr
 from skyref.io.png import exposure_from_ev100, write_png
+from skyref.io.polarization import luminance_stokes, preview_paths, write_polarization_pngs
 from skyref.lut import METHODS, lut_method, method_class
 from skyref.lut import REGISTRY as LUT_REGISTRY
 from skyref.render import render_sky
 from skyref.scene import load_scene
+from skyref.sky import degree_of_linear_polarization
 from skyref.timelapse import frame_times, parse_place, render_timelapse, sun_from_options, timelapse_scene
 from skyref.validation import check_choice, check_int, check_output_directory, check_output_file, safe_file_name
 
@@ -70,7 +72,8 @@ def _describe_scene(scene) -> str:
         f"observer     altitude {scene.observer.altitude_m:g} m",
         f"camera       {scene.camera.type} {scene.camera.width}x{scene.camera.height}, fov {scene.camera.fov_deg:g} deg",
         f"wavelengths  {len(wl)}: {wl[0]:g}–{wl[-1]:g} nm",
-        f"render       {scene.render.spp} spp in {scene.render.passes} passes, seed {scene.render.seed}",
+        f"render       {scene.render.spp} spp in {scene.render.passes} passes, seed {scene.render.seed}"
+        + (", polarized (Stokes I, Q, U, V)" if scene.render.polarized else ""),
     ]
     return "\n".join(lines)
 
@@ -101,6 +104,14 @@ def cmd_info(args) -> int:
     return 0
 
 
+def _polarization_summary(sky) -> str:
+    """The luminance-weighted degree of linear polarization of a polarized sky, in words."""
+    dolp = degree_of_linear_polarization(luminance_stokes(sky), axis=-1)
+    dolp = dolp[np.isfinite(dolp)]
+    return (f"degree of linear polarization (luminance) median {np.median(dolp):.2f}, max {dolp.max():.2f}"
+            if dolp.size else "no light to polarize")
+
+
 def cmd_render(args) -> int:
     layers = check_layers(args.layers, "--layers")
     check_output_file(args.output, ".exr", "--output")
@@ -114,21 +125,28 @@ def cmd_render(args) -> int:
     scene = scene.replace(sun=sun_from_options(scene.sun, args.time, args.place))
     if args.annotate:
         check_annotatable(scene.camera, "--annotate")
+    polarized = scene.render.polarized if args.polarized is None else args.polarized
+    if polarized and args.png:
+        for path in preview_paths(args.png).values():
+            check_output_file(path, ".png", "--png")
     if args.time or args.place:
         print(f"sun at zenith {scene.sun.zenith_deg:.2f} deg, azimuth {scene.sun.azimuth_deg:.2f} deg "
               f"({scene.sun.time.isoformat()} at {scene.sun.latitude_deg:g} N, {scene.sun.longitude_deg:g} E)")
     sky = render_sky(scene, spp=args.spp, passes=args.passes, seed=args.seed, variant=args.variant,
-                     geometry=args.geometry, progress=not args.quiet)
+                     geometry=args.geometry, progress=not args.quiet, polarized=polarized)
     write_sky_exr(sky, args.output, layers=layers, half=args.half, report=print)
     if args.png:
         write_png(sky, args.png, exposure=exposure, annotate=args.annotate)
+        if sky.polarized:
+            write_polarization_pngs(sky, args.png, annotate=args.annotate)
     meta = sky.metadata
     visible = sky.radiance > 0
     noise = (f"median relative standard error "
              f"{100 * float(np.median(sky.standard_error[visible] / sky.radiance[visible])):.1f}%"
              if visible.any() else "the sky is black (nothing scatters or reflects light towards the camera)")
     print(f"{args.output}: {sky.shape[1]}x{sky.shape[0]} px, {sky.shape[2]} wavelengths, {meta['spp']} spp "
-          f"in {meta['render_time_s']:.1f} s ({meta['samples_per_second'] / 1e6:.2f} M samples/s), {noise}")
+          f"in {meta['render_time_s']:.1f} s ({meta['samples_per_second'] / 1e6:.2f} M samples/s), {noise}"
+          + (f"; polarized, {_polarization_summary(sky)}" if sky.polarized else ""))
     return 0
 
 
@@ -304,8 +322,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--variant", help="Mitsuba variant (default: cuda_ad_rgb with a GPU, else llvm_ad_rgb)")
     p.add_argument("--geometry", default="spherical", choices=("spherical", "plane_parallel"),
                    help="planet geometry (plane_parallel is for comparisons with DISORT)")
+    p.add_argument("--polarized", action=argparse.BooleanOptionalAction, default=None,
+                   help="transport Stokes vectors (default: the scene's render.polarized): the EXR gets the layout's "
+                   "S0-S3 layers (I, Q, U, V in each pixel's meridian frame) and DoLP/AoLP layers, --png also "
+                   "NAME.dolp.png and NAME.aolp.png")
     p.add_argument("--annotate", action="store_true", help="draw the horizon, N/E/S/W and a ring around the sun "
-                   "on the PNG preview (fisheye and equirectangular cameras)")
+                   "on the PNG previews (fisheye and equirectangular cameras)")
     p.add_argument("--exposure", type=float, metavar="EV", help="absolute exposure of the PNG preview, EV at ISO 100 "
                    "(a clear day's sky: about 13): luminance 1.2*2^EV cd/m^2 maps to 1 before the tone curve x/(1+x), "
                    "so equal luminances give equal pixels in every image (default: per image, the 99th percentile "

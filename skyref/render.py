@@ -5,6 +5,12 @@ its standard error the spread of the batch means / sqrt(passes) (16 batches by d
 the standard error has 3 degrees of freedom and 7-10% of estimates fall beyond 3 sigma). All
 batches are traced together, in launches whose size the integrator bounds
 (:meth:`~skyref.plugins.integrator.AtmosphereIntegrator.launch_sizes`).
+
+A polarized render (the scene's ``render.polarized``, or ``render_sky(..., polarized=True)``)
+carries a Stokes axis (I, Q, U, V) through every step, passes, adaptive rounds and regions
+alike: per pass (passes, M, orders, 4, N), pooled per component, and the sky's ``stokes``
+(:class:`~skyref.sky.Sky`); a scalar render is the same with that axis of length 1, dropped in
+the sky. Adaptive rounds aim at I's error.
 """
 
 from __future__ import annotations
@@ -22,15 +28,17 @@ from skyref.errors import ParameterError
 from skyref.plugins import load_mitsuba
 from skyref.projection import camera_to_world, pixel_directions
 from skyref.scene import RenderSettings
-from skyref.sky import ORDER_NAMES, Sky
+from skyref.sky import ORDER_NAMES, STOKES, Sky
 from skyref.validation import check_choice, check_number
 
-__all__ = ["MAX_IMAGE_VALUES", "GEOMETRIES", "sensor_dict", "build_integrator", "check_image_size", "render_sky",
+__all__ = ["MAX_IMAGE_VALUES", "GEOMETRIES", "sensor_dict", "build_integrator", "stokes_components",
+           "check_image_size", "render_sky",
            "rendered_pixels", "relative_error_percentile", "pixel_relative_error", "PixelPool",
            "render_to_error", "ROUND_MARGIN"]
 
-#: Most values (passes x pixels x scattering orders x wavelengths) one render accumulates: each
-#: takes ~12 bytes across the device buffer and its host copies, so this is ~13 GB.
+#: Most values (passes x pixels x scattering orders x Stokes components (polarized: 4) x
+#: wavelengths) one render accumulates: each takes ~12 bytes across the device buffer and its host
+#: copies, so this is ~13 GB.
 MAX_IMAGE_VALUES = 1 << 30
 
 #: :func:`render_to_error` gives a pixel this margin over the samples the 1/sqrt(spp) law says it
@@ -74,24 +82,33 @@ def build_integrator(scene, geometry: str = "spherical", wavelengths_per_path: i
     return integrator
 
 
+def stokes_components(scene) -> int:
+    """Values per wavelength in the scene's render: the Stokes components if it is polarized,
+    else 1 (radiance)."""
+    return len(STOKES) if scene.render.polarized else 1
+
+
 def check_image_size(scene, passes: int) -> None:
     """Refuse, before any work, a render whose per-pass images would exceed MAX_IMAGE_VALUES,
     saying how large a camera fits and the ways around (tiles, fewer passes or wavelengths)."""
     camera, wavelengths = scene.camera, len(scene.wavelengths_nm)
-    per_pixel = passes * len(ORDER_NAMES) * wavelengths
+    per_pixel = passes * len(ORDER_NAMES) * stokes_components(scene) * wavelengths
     if camera.width * camera.height * per_pixel > MAX_IMAGE_VALUES:
+        polarized = f" (polarized: {len(STOKES)} Stokes components each)" if scene.render.polarized else ""
         raise ParameterError("camera", f"{camera.width}x{camera.height}",
-                             f"at most {MAX_IMAGE_VALUES // per_pixel:,} pixels at {wavelengths} wavelengths and "
-                             f"{passes} passes", "too large for one render: render it in tiles (cameras "
-                             "covering parts of the view), or with fewer passes or wavelengths")
+                             f"at most {MAX_IMAGE_VALUES // per_pixel:,} pixels at {wavelengths} wavelengths"
+                             f"{polarized} and {passes} passes", "too large for one render: render it in tiles "
+                             "(cameras covering parts of the view), or with fewer passes or wavelengths")
 
 
-def _settings(scene, spp, passes, seed) -> RenderSettings:
-    """The scene's render settings with ``spp``, ``passes`` and ``seed`` overridden."""
+def _settings(scene, spp, passes, seed, polarized=None) -> RenderSettings:
+    """The scene's render settings with ``spp``, ``passes``, ``seed`` and ``polarized``
+    overridden (None: the scene's)."""
     render = scene.render
     return dataclasses.replace(render, spp=render.spp if spp is None else spp,
                                passes=render.passes if passes is None else passes,
-                               seed=render.seed if seed is None else seed)
+                               seed=render.seed if seed is None else seed,
+                               polarized=render.polarized if polarized is None else polarized)
 
 
 def rendered_pixels(scene) -> np.ndarray:
@@ -105,7 +122,8 @@ def rendered_pixels(scene) -> np.ndarray:
 
 
 class _PixelRenderer:
-    """The integrator and sensor of one scene, to trace any set of its pixels in passes."""
+    """The integrator and sensor of one scene, to trace any set of its pixels in passes; polarized
+    if the scene's ``render.polarized`` says so."""
 
     def __init__(self, scene, variant, geometry, wavelengths_per_path, estimator):
         check_choice("geometry", geometry, GEOMETRIES)
@@ -113,7 +131,8 @@ class _PixelRenderer:
         check_image_size(scene, scene.render.passes)
         self.mi = load_mitsuba(variant)
         self.scene, self.geometry = scene, geometry
-        self.integrator = build_integrator(scene, geometry, wavelengths_per_path, estimator)
+        self.integrator = build_integrator(scene, geometry, wavelengths_per_path, estimator,
+                                           polarized=scene.render.polarized)
         self.sensor = self.mi.load_dict(sensor_dict(scene.camera))
         if scene.objects:
             try:
@@ -124,17 +143,17 @@ class _PixelRenderer:
                                      "shapes Mitsuba can load", str(exc).strip().splitlines()[0][:200]) from None
 
     def passes(self, pixels, spp_per_pass: int, passes: int, seed: int, progress=None) -> np.ndarray:
-        """(passes, M, orders, N) radiance of the ``pixels`` from independent passes of
-        ``spp_per_pass`` samples each."""
+        """(passes, M, orders, S, N) radiance of the ``pixels`` from independent passes of
+        ``spp_per_pass`` samples each: S = 4 Stokes components if polarized, else 1."""
         per_pass = self.integrator.render_orders(
             self.sensor, seed=seed % (1 << 32), spp=spp_per_pass, batches=passes, progress=progress,
             pixel_centres=self.scene.render.pixel_sampling == "centre", pixels=pixels).numpy()
-        return per_pass.reshape(passes, len(pixels), len(ORDER_NAMES), -1)
+        return per_pass.reshape(passes, len(pixels), len(ORDER_NAMES), stokes_components(self.scene), -1)
 
     @staticmethod
     def statistics(per_pass: np.ndarray) -> tuple:
-        """The mean per order (M, orders, N) of :meth:`passes`' output and the standard error
-        of the radiance (M, N): the spread of the pass means / sqrt(passes)."""
+        """The mean per order (M, orders, S, N) of :meth:`passes`' output and the standard error
+        of the total (M, S, N): the spread of the pass means / sqrt(passes)."""
         return per_pass.mean(axis=0), per_pass.sum(axis=2).std(axis=0, ddof=1) / math.sqrt(per_pass.shape[0])
 
     def metadata(self, spp: int, passes: int, seed, elapsed: float, samples: int) -> dict:
@@ -145,28 +164,35 @@ class _PixelRenderer:
 
 
 def _sky(scene, pixels, radiance, standard_error, orders, metadata) -> Sky:
-    """A :class:`Sky` from per-pixel values of the rendered ``pixels`` (M, N) and (M, orders,
-    N); pixels that were not rendered are NaN."""
+    """A :class:`Sky` from per-pixel values of the rendered ``pixels``: ``radiance`` and
+    ``standard_error`` (M, S, N), ``orders`` (M, orders, S, N), with S Stokes components if
+    the scene is polarized (the sky's ``stokes``; I is its radiance), else 1; pixels that were
+    not rendered are NaN."""
     camera = scene.camera
     count, n = camera.width * camera.height, len(scene.wavelengths_nm)
+    components = stokes_components(scene)
 
     def image(values, shape):
         full = np.full((count, *shape), np.nan, dtype=np.float32)
         full[pixels] = values
         return full.reshape(camera.height, camera.width, *shape)
 
-    by_order = image(orders, (len(ORDER_NAMES), n))
-    return Sky(radiance=image(radiance, (n,)), standard_error=image(standard_error, (n,)),
+    by_order = image(orders, (len(ORDER_NAMES), components, n))
+    total, error = image(radiance, (components, n)), image(standard_error, (components, n))
+    polarized = scene.render.polarized
+    return Sky(radiance=np.ascontiguousarray(total[..., 0, :]), standard_error=np.ascontiguousarray(error[..., 0, :]),
                wavelengths_nm=np.asarray(scene.wavelengths_nm, dtype=np.float64),
                directions=pixel_directions(camera),
-               orders={name: np.ascontiguousarray(by_order[..., i, :]) for i, name in enumerate(ORDER_NAMES)},
-               scene=scene, metadata=metadata)
+               orders={name: np.ascontiguousarray(by_order[..., i, 0, :]) for i, name in enumerate(ORDER_NAMES)},
+               scene=scene, metadata=metadata, stokes=total if polarized else None,
+               stokes_error=error if polarized else None)
 
 
 def render_sky(scene, spp: int | None = None, passes: int | None = None, seed: int | None = None,
                variant: str | None = None, geometry: str = "spherical", wavelengths_per_path: int = 0,
-               progress: bool = False, estimator: str | None = None) -> Sky:
-    """Render ``scene``; ``spp``, ``passes`` and ``seed`` override the scene's render settings.
+               progress: bool = False, estimator: str | None = None, polarized: bool | None = None) -> Sky:
+    """Render ``scene``; ``spp``, ``passes``, ``seed`` and ``polarized`` override the scene's
+    render settings.
 
     Returns a :class:`~skyref.sky.Sky`: radiance (H, W, N) in W m^-2 sr^-1 nm^-1 at the scene's
     wavelengths, its standard error, one layer per scattering order, pixel directions, and
@@ -174,8 +200,10 @@ def render_sky(scene, spp: int | None = None, passes: int | None = None, seed: i
     ``render.region`` are not traced and are NaN. ``geometry="plane_parallel"`` flattens the
     planet (for comparisons with plane-parallel solvers such as DISORT); ``estimator`` picks
     the integrator's estimator (see :data:`skyref.plugins.integrator.ESTIMATORS`).
+    ``polarized`` transports Stokes vectors (the ``delta_tracking`` estimator only): the sky
+    then also has ``stokes`` (H, W, 4, N) and its radiance is I.
     """
-    settings = _settings(scene, spp, passes, seed)
+    settings = _settings(scene, spp, passes, seed, polarized)
     if settings.spp < settings.passes:
         raise ParameterError("spp", settings.spp, f">= passes ({settings.passes})", "too few samples")
     scene = scene.replace(render=settings)
@@ -220,10 +248,13 @@ class PixelPool:
     samples: mean = sum_i n_i x_i / n, standard error sqrt(sum_i (n_i / n)^2 SE_i^2), with n_i
     the samples of estimate i at that pixel (pixels may have different counts)."""
 
-    def __init__(self, pixels: int, orders: int, wavelengths: int):
+    def __init__(self, pixels: int, orders: int, wavelengths: int, stokes: int | None = None):
+        """``stokes``: values per wavelength of each estimate (Stokes components, or 1), on an
+        axis before the wavelengths; None: no such axis."""
+        values = (wavelengths,) if stokes is None else (stokes, wavelengths)
         self.samples = np.zeros(pixels, dtype=np.int64)
-        self.orders = np.zeros((pixels, orders, wavelengths))      # mean per order
-        self.variance = np.zeros((pixels, wavelengths))            # of the mean radiance
+        self.orders = np.zeros((pixels, orders, *values))      # mean per order
+        self.variance = np.zeros((pixels, *values))            # of the mean radiance
 
     @property
     def radiance(self) -> np.ndarray:
@@ -235,11 +266,12 @@ class PixelPool:
 
     def add(self, pixels: np.ndarray, samples: int, orders: np.ndarray, standard_error: np.ndarray) -> None:
         """Pool an estimate of ``pixels`` (indices into the pool) from ``samples`` samples each:
-        its per-order means (len(pixels), orders, N) and standard error (len(pixels), N)."""
+        its per-order means (len(pixels), orders, [S,] N) and standard error (len(pixels), [S,] N)."""
         before = self.samples[pixels]
         total = before + samples
-        old, new = (before / total)[:, None], (samples / total)[:, None]
-        self.orders[pixels] = old[..., None] * self.orders[pixels] + new[..., None] * orders
+        share = (1,) * (self.variance.ndim - 1)
+        old, new = (before / total).reshape(-1, *share), (samples / total).reshape(-1, *share)
+        self.orders[pixels] = old[:, None] * self.orders[pixels] + new[:, None] * orders
         self.variance[pixels] = old ** 2 * self.variance[pixels] + new ** 2 * standard_error.astype(np.float64) ** 2
         self.samples[pixels] = total
 
@@ -255,7 +287,8 @@ def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, in
     1/sqrt(spp) law asks for (with a ROUND_MARGIN), rounded up to ``passes`` x a power of two
     (so a round is a few launches, one per count), within ``max_spp``. The sky's metadata
     records the mean, smallest and largest samples per pixel, the share of pixels at the
-    target and the 95th percentile of the relative error."""
+    target and the 95th percentile of the relative error. A polarized scene (``render.polarized``)
+    pools every Stokes component and aims at I's error."""
     check_number("target_relative_error", target_relative_error, 1e-5, 1.0)
     passes = scene.render.passes
     spp = min(initial_spp or max(16 * passes, 64), max_spp)
@@ -264,7 +297,7 @@ def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, in
     scene = scene.replace(render=_settings(scene, spp, None, seeds[0]))
     renderer = _PixelRenderer(scene, variant, "spherical", 0, None)
     pixels = rendered_pixels(scene)
-    pool = PixelPool(pixels.size, len(ORDER_NAMES), len(scene.wavelengths_nm))
+    pool = PixelPool(pixels.size, len(ORDER_NAMES), len(scene.wavelengths_nm), stokes_components(scene))
     elapsed, used_seeds = 0.0, []
 
     def trace(members, spp_per_pass, seed):
@@ -278,7 +311,7 @@ def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, in
         if round_index == 0:
             trace(np.arange(pixels.size), spp // passes, seed)
         else:
-            error = pixel_relative_error(pool.radiance, pool.standard_error)
+            error = pixel_relative_error(pool.radiance[:, 0], pool.standard_error[:, 0])
             with np.errstate(invalid="ignore", over="ignore"):
                 wanted = np.ceil(ROUND_MARGIN * pool.samples * (error / target_relative_error) ** 2) - pool.samples
             room = (max_spp - pool.samples) // passes                  # samples per pass left
@@ -292,7 +325,7 @@ def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, in
                 trace(members, int(count), (seed + 0x9E3779B1 * int(count).bit_length()) % (1 << 31))
         used_seeds.append(seed)
 
-    error = pixel_relative_error(pool.radiance, pool.standard_error)
+    error = pixel_relative_error(pool.radiance[:, 0], pool.standard_error[:, 0])
     samples = int(pool.samples.sum())
     metadata = renderer.metadata(round(samples / max(pixels.size, 1)), passes, used_seeds, elapsed, samples)
     metadata.update(target_relative_error=target_relative_error,

@@ -190,7 +190,9 @@ class RenderSettings:
     ``"centre"`` (the pixel-centre direction only: radiance along exact directions, which is
     what other sky methods evaluate, e.g. in audits); and which pixels are traced: ``"all"``, or
     ``"above_horizon"``, those whose centre looks at or above the observer's horizon (view
-    zenith <= 90 deg; the others are NaN), for consumers of the sky alone."""
+    zenith <= 90 deg; the others are NaN), for consumers of the sky alone. ``polarized``
+    transports Stokes vectors (I, Q, U, V; :mod:`skyref.plugins.polarization`) instead of
+    radiance: the sky then has ``stokes`` too, and its radiance is I."""
 
     spp: int = 64
     seed: int = 0
@@ -198,6 +200,7 @@ class RenderSettings:
     max_depth: int = 64
     pixel_sampling: str = "area"
     region: str = "all"
+    polarized: bool = False
 
     def __post_init__(self):
         for name, lo, hi in (("spp", 1, 1 << 24), ("seed", 0, (1 << 31) - 1), ("passes", 2, 1024),
@@ -207,9 +210,17 @@ class RenderSettings:
                 raise ParameterError(f"render.{name}", value, f"an integer in [{lo}, {hi}]", "invalid")
         check_choice("render.pixel_sampling", self.pixel_sampling, PIXEL_SAMPLING)
         check_choice("render.region", self.region, RENDER_REGIONS)
+        if not isinstance(self.polarized, (bool, np.bool_)):
+            raise ParameterError("render.polarized", self.polarized, "true or false", "not a boolean")
+        object.__setattr__(self, "polarized", bool(self.polarized))
 
     def to_dict(self) -> dict:
-        return dataclasses.asdict(self)
+        """The settings as a TOML table; ``polarized`` only when true, so that a scalar scene is
+        written (in image headers, cache keys, batch fingerprints) as before it existed."""
+        data = dataclasses.asdict(self)
+        if not self.polarized:
+            del data["polarized"]
+        return data
 
     @classmethod
     def from_dict(cls, data: dict) -> "RenderSettings":

@@ -39,7 +39,8 @@ from skyref.validation import check_array, check_choice, check_fields, check_num
 from skyref.errors import ParameterError
 
 __all__ = ["rayleigh_phase", "cornette_shanks_phase", "henyey_greenstein_phase", "sample_rayleigh_cosine",
-           "sample_henyey_greenstein_cosine", "cornette_shanks_asymmetry", "PhaseFunction", "RayleighPhase",
+           "sample_henyey_greenstein_cosine", "cornette_shanks_asymmetry", "PhaseFunction", "RayleighPhase", "MiePhase",
+           "read_mie_table",
            "CornetteShanks", "HenyeyGreenstein", "TabulatedPhase", "PHASE_TYPES", "phase_from_dict"]
 
 INV_4PI = 1.0 / (4.0 * math.pi)
@@ -268,13 +269,83 @@ class TabulatedPhase(PhaseFunction):
         return {"type": self.kind, "cosines": list(self.cosines), "values": list(self.values)}
 
 
-PHASE_TYPES = {cls.kind: cls for cls in (RayleighPhase, CornetteShanks, HenyeyGreenstein, TabulatedPhase)}
+@dataclass(frozen=True)
+class MiePhase(TabulatedPhase):
+    """The phase matrix of spherical particles (Mie theory), tabulated at increasing ``cosines``
+    in [-1, 1]: P11 (``values``), P12, P33 and P34 (for spheres P22 = P11 and P44 = P33), in any
+    common normalisation (all four are scaled by the factor that normalises P11), interpolated
+    linearly in mu and sampled like :class:`TabulatedPhase`. Polarized transport uses the whole
+    matrix; scalar transport P11. :func:`read_mie_table` reads one from a libRadtran netCDF file
+    (IPRT's ``waso.mie.cdf``)."""
+
+    p12: tuple = ()
+    p33: tuple = ()
+    p34: tuple = ()
+    kind = "mie"
+
+    def __post_init__(self):
+        raw = check_array("values", self.values, 0.0, math.inf, min_length=2)
+        super().__post_init__()
+        scale = float(np.max(self.values)) / float(np.max(raw))
+        for name in ("p12", "p33", "p34"):
+            element = check_array(name, getattr(self, name), -math.inf, math.inf, min_length=2)
+            if element.size != raw.size:
+                raise ParameterError(name, list(getattr(self, name))[:4], f"{raw.size} numbers, one per cosine",
+                                     f"{element.size} values")
+            if np.any(np.abs(element) > raw * (1.0 + 1e-4) + 1e-12 * raw.max()):
+                raise ParameterError(name, list(getattr(self, name))[:4], "|P| <= P11 at every angle",
+                                     "not a phase matrix of a particle")
+            object.__setattr__(self, name, tuple(float(x) * scale for x in element))
+
+    def matrix(self, mu, xp=np, cosines=None, values=None, p12=None, p33=None, p34=None):
+        cosines = self.cosines if cosines is None else cosines
+
+        def element(table, own):
+            return xp.interp(mu, cosines, own if table is None else table)
+
+        p11 = self.evaluate(mu, xp, cosines, values)
+        p33_mu = element(p33, self.p33)
+        return p11, element(p12, self.p12), p11, p33_mu, element(p34, self.p34), p33_mu
+
+    def to_dict(self):
+        return {**super().to_dict(), "p12": list(self.p12), "p33": list(self.p33), "p34": list(self.p34)}
+
+
+def read_mie_table(path) -> tuple:
+    """A :class:`MiePhase` and the single-scattering albedo from a libRadtran Mie-tool netCDF
+    file (variables ``theta`` in degrees and ``phase`` holding P1, P2, P3, P4 of the matrix
+    [[P1 P2 0 0] [P2 P1 0 0] [0 0 P3 P4] [0 0 -P4 P3]], each on its own angle grid padded with
+    -999, and ``ssa``; the first wavelength and size). The elements are put on the union of
+    their grids."""
+    from scipy.io import netcdf_file
+
+    try:
+        with netcdf_file(path, "r", mmap=False) as data:
+            angles = data.variables["theta"].shape[-1]      # (wavelength, size, element, angle)
+            theta = np.asarray(data.variables["theta"][:], np.float64).reshape(-1, 4, angles)[0]
+            phase = np.asarray(data.variables["phase"][:], np.float64).reshape(-1, 4, angles)[0]
+            albedo = float(np.asarray(data.variables["ssa"][:]).ravel()[0])
+    except (OSError, KeyError, TypeError, ValueError) as exc:
+        raise ParameterError("mie table", str(path), "a libRadtran Mie netCDF file with theta, phase and ssa",
+                             f"unreadable: {exc}") from None
+    grids = []
+    for t, p in zip(theta, phase):
+        mu = np.cos(np.radians(t[t > -900.0]))
+        order = np.argsort(mu)
+        grids.append((mu[order], p[t > -900.0][order]))
+    cosines = np.unique(np.clip(np.concatenate([mu for mu, _ in grids]), -1.0, 1.0))
+    elements = [np.interp(cosines, mu, p) for mu, p in grids]
+    return MiePhase(tuple(cosines), tuple(elements[0]), tuple(elements[1]), tuple(elements[2]),
+                    tuple(elements[3])), albedo
+
+
+PHASE_TYPES = {cls.kind: cls for cls in (RayleighPhase, CornetteShanks, HenyeyGreenstein, TabulatedPhase, MiePhase)}
 
 
 def phase_from_dict(data: dict) -> PhaseFunction:
     fields = dict(data)
     kind = check_choice("phase.type", fields.pop("type", None), tuple(PHASE_TYPES))
     check_fields("phase", fields, PHASE_TYPES[kind])
-    if kind == TabulatedPhase.kind:
-        return TabulatedPhase(tuple(fields["cosines"]), tuple(fields["values"]))
+    if kind in (TabulatedPhase.kind, MiePhase.kind):
+        return PHASE_TYPES[kind](**{key: tuple(value) for key, value in fields.items()})
     return PHASE_TYPES[kind](**fields)

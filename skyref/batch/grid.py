@@ -227,10 +227,15 @@ class Grid:
     def validate(self):
         """Build the base scene, the scene of every axis value (the other axes as in the base)
         and the scenes of the grid's corners; raise :class:`ParameterError` naming the base,
-        the axis or the combination at fault. Returns the scene of sky 0."""
+        the axis or the combination at fault (a polarized base scene too: the dataset holds
+        radiance only). Returns the scene of sky 0."""
         def build(coordinates, name, value):
             try:
                 scene = Scene.from_dict(self.scene_dict(coordinates))
+                if scene.render.polarized:
+                    raise ParameterError("render.polarized", True, "false: a batch's dataset holds radiance "
+                                         "only (render polarized skies one by one with skyref render)",
+                                         "not supported in batches yet")
                 check_image_size(scene, self.output.passes)
                 return scene
             except ParameterError as exc:

@@ -5,12 +5,17 @@ it (spectral-exr, colour's ``read_spectral_image_Fichet2021``) open them.
 Channels, grouped in the layers of :data:`LAYERS` (by default all of them: a complete
 reference; ``layers`` picks fewer, e.g. ``("rgb",)`` for an environment map):
 
-- ``radiance``: ``S0.<wavelength>nm``, the spectral radiance (unpolarised: Stokes component 0
-  only), the wavelength in nm written with a comma as decimal separator and 6 decimals, e.g.
-  ``S0.550,000000nm`` (the layout reserves ``.`` for layers);
-- ``error``: ``stderr.S0.<wavelength>nm``, the standard error of the radiance;
+- ``radiance``: ``S0.<wavelength>nm``, the spectral radiance, the wavelength in nm written with
+  a comma as decimal separator and 6 decimals, e.g. ``S0.550,000000nm`` (the layout reserves
+  ``.`` for layers). A polarized sky (``sky.stokes``) has the layout's polarised form: S0 (I,
+  ``sky.radiance``), ``S1`` (Q), ``S2`` (U) and ``S3`` (V) channels per wavelength, and two
+  layers derived from them, ``DoLP.<wavelength>nm`` (degree of linear polarization,
+  sqrt(S1^2 + S2^2) / S0, 0 to 1) and ``AoLP.<wavelength>nm`` (angle of linear polarization,
+  0.5 atan2(S2, S1), degrees in [-90, 90]), NaN where S0 is 0 or not finite;
+- ``error``: ``stderr.S0.<wavelength>nm``, the standard error of the radiance (polarized:
+  ``stderr.S1`` to ``stderr.S3`` too, those of Q, U, V);
 - ``orders``: ``<order>.S0.<wavelength>nm`` for each scattering order of
-  :data:`skyref.sky.ORDER_NAMES` the sky has;
+  :data:`skyref.sky.ORDER_NAMES` the sky has (radiance, I when polarized);
 - ``rgb``: ``R``, ``G``, ``B``, the linear sRGB preview
   (:func:`skyref.color.spectral_to_linear_srgb`, scale: Y in cd m^-2).
 
@@ -22,7 +27,12 @@ sun's disk in the RGB preview, ~1.6e9 cd m^-2 at noon; its spectral radiance, ~3
 Header: ``spectralLayoutVersion = "1.0"`` and ``emissiveUnits = "W.m^-2.sr^-1"`` as the layout
 requires, when spectral channels are written (the only emissive unit it defines; the values are
 spectral radiance per nm, which ``skyref.radianceUnits = "W.m^-2.sr^-1.nm^-1"`` states
-explicitly), ``skyref.scene`` (the scene as TOML, when the sky has one) and
+explicitly); with S1-S3 channels, the layout's ``polarisationHandedness = "right"`` and
+``skyref.stokesFrame``, which says in words that every pixel's Stokes vector is referred to the
+meridian frame of its own viewing direction (:data:`STOKES_FRAME`;
+:mod:`skyref.plugins.polarization`: e_par in the vertical plane through the view direction,
+e_perp = normalize(view x up), and e_par, e_perp, view direction a right-handed triple);
+``skyref.scene`` (the scene as TOML, when the sky has one) and
 ``skyref.metadata`` (JSON of ``sky.metadata`` but its timings, :data:`skyref.sky.TIMING_METADATA`:
 the same render gives the same bytes).
 
@@ -51,15 +61,26 @@ from skyref.io.atomic import atomic_path
 from skyref.io.json_numpy import numpy_default
 from skyref.projection import pixel_directions
 from skyref.scene import Scene
-from skyref.sky import ORDER_NAMES, TIMING_METADATA, Sky
+from skyref.sky import (ORDER_NAMES, STOKES, TIMING_METADATA, Sky, angle_of_linear_polarization,
+                        degree_of_linear_polarization)
 
-__all__ = ["SPECTRAL_LAYOUT_VERSION", "EMISSIVE_UNITS", "RADIANCE_UNITS", "STDERR_LAYER", "LAYERS", "HALF_MAX",
-           "channel_name", "check_layers", "write_sky_exr", "read_sky_exr"]
+__all__ = ["SPECTRAL_LAYOUT_VERSION", "EMISSIVE_UNITS", "RADIANCE_UNITS", "STDERR_LAYER", "DOLP_LAYER", "AOLP_LAYER",
+           "POLARISATION_HANDEDNESS", "STOKES_FRAME", "LAYERS", "HALF_MAX", "channel_name", "check_layers",
+           "write_sky_exr", "read_sky_exr"]
 
 SPECTRAL_LAYOUT_VERSION = "1.0"
 EMISSIVE_UNITS = "W.m^-2.sr^-1"
 RADIANCE_UNITS = "W.m^-2.sr^-1.nm^-1"
 STDERR_LAYER = "stderr"
+#: Layers derived from a polarized sky's Stokes channels: degree (0-1) and angle (degrees) of
+#: linear polarization per wavelength.
+DOLP_LAYER, AOLP_LAYER = "DoLP", "AoLP"
+#: The layout's ``polarisationHandedness`` of skyref's Stokes frames (see the module docstring).
+POLARISATION_HANDEDNESS = "right"
+#: ``skyref.stokesFrame``: the frame of every pixel's Stokes vector, in words.
+STOKES_FRAME = ("meridian frame of each pixel's viewing direction d: e_par in the vertical plane through d, "
+                "e_perp = normalize(d x up); Q = I_par - I_perp, U = I(+45 deg) - I(-45 deg) with +45 deg along "
+                "e_par + e_perp (skyref.plugins.polarization)")
 #: The layers :func:`write_sky_exr` can write (see the module docstring), in file order.
 LAYERS = ("radiance", "error", "orders", "rgb")
 #: The largest finite 16-bit half float.
@@ -76,9 +97,14 @@ _PREFIX_EXPONENT = {"Y": 24, "Z": 21, "E": 18, "P": 15, "T": 12, "G": 9, "M": 6,
 _SPEED_OF_LIGHT = 299_792_458.0
 
 
-def channel_name(wavelength_nm: float, layer: str = "") -> str:
-    """``[layer.]S0.<wavelength>nm`` with 6 decimals and a decimal comma."""
-    name = "S0." + f"{float(wavelength_nm):.6f}".replace(".", ",") + "nm"
+def _wavelength_text(wavelength_nm: float) -> str:
+    """``<wavelength>nm`` with 6 decimals and a decimal comma."""
+    return f"{float(wavelength_nm):.6f}".replace(".", ",") + "nm"
+
+
+def channel_name(wavelength_nm: float, layer: str = "", stokes: int = 0) -> str:
+    """``[layer.]S<stokes>.<wavelength>nm`` with 6 decimals and a decimal comma."""
+    name = f"S{stokes}." + _wavelength_text(wavelength_nm)
     return f"{layer}.{name}" if layer else name
 
 
@@ -93,11 +119,10 @@ def _channel_wavelength_nm(match) -> float:
     return _SPEED_OF_LIGHT / frequency * 1e9 if frequency > 0.0 else math.inf
 
 
-def _check_layer(name: str, array, shape) -> np.ndarray:
+def _check_layer(name: str, array, shape, axes: str = "height, width, wavelengths") -> np.ndarray:
     array = np.asarray(array)
     if array.shape != shape:
-        raise ParameterError(name, f"array of shape {array.shape}", f"shape {shape} (height, width, wavelengths)",
-                             "shape mismatch")
+        raise ParameterError(name, f"array of shape {array.shape}", f"shape {shape} ({axes})", "shape mismatch")
     return np.ascontiguousarray(array, dtype=np.float32)
 
 
@@ -142,22 +167,38 @@ def write_sky_exr(sky: Sky, path, layers=LAYERS, half: bool = False, report=None
                              "duplicate wavelengths")
     shape = radiance.shape
     radiance = _check_layer("sky.radiance", radiance, shape)
-    spectral = {"": radiance} if "radiance" in layers else {}      # channel-name prefix -> (H, W, N)
+    stokes_shape = (shape[0], shape[1], len(STOKES), shape[2])
+    polarization = "height, width, Stokes components I Q U V, wavelengths"
+    # (channel-name prefix, Stokes component) -> (H, W, N); S0 is always the sky's radiance and
+    # standard error, S1-S3 come from a polarized sky's Stokes vectors.
+    spectral = {("", 0): radiance} if "radiance" in layers else {}
+    if "radiance" in layers and sky.stokes is not None:
+        stokes = _check_layer("sky.stokes", sky.stokes, stokes_shape, polarization)
+        spectral.update(((("", s), stokes[..., s, :]) for s in range(1, len(STOKES))))
     if "error" in layers:
-        spectral[STDERR_LAYER] = _check_layer("sky.standard_error", sky.standard_error, shape)
+        spectral[STDERR_LAYER, 0] = _check_layer("sky.standard_error", sky.standard_error, shape)
+        if sky.stokes_error is not None:
+            errors = _check_layer("sky.stokes_error", sky.stokes_error, stokes_shape, polarization)
+            spectral.update((((STDERR_LAYER, s), errors[..., s, :]) for s in range(1, len(STOKES))))
     if "orders" in layers:
         for order, values in sky.orders.items():
             if order not in ORDER_NAMES:
                 raise ParameterError("sky.orders", order, ", ".join(ORDER_NAMES), "unknown scattering order")
-            spectral[order] = _check_layer(f"sky.orders[{order!r}]", values, shape)
+            spectral[order, 0] = _check_layer(f"sky.orders[{order!r}]", values, shape)
 
     channels = {}
     if "rgb" in layers:
         rgb = spectral_to_linear_srgb(radiance, wavelengths).astype(np.float32)
         channels.update((c, rgb[..., i]) for i, c in enumerate("RGB"))
-    for prefix, values in spectral.items():
+    for (prefix, component), values in spectral.items():
         for k, wavelength in enumerate(wavelengths):
-            channels[channel_name(wavelength, prefix)] = values[..., k]
+            channels[channel_name(wavelength, prefix, component)] = values[..., k]
+    if ("", 1) in spectral:
+        written = np.stack([spectral["", s] for s in range(len(STOKES))], axis=-2)
+        for layer, derived in ((DOLP_LAYER, degree_of_linear_polarization(written)),
+                               (AOLP_LAYER, angle_of_linear_polarization(written))):
+            for k, wavelength in enumerate(wavelengths):
+                channels[f"{layer}.{_wavelength_text(wavelength)}"] = derived[..., k].astype(np.float32)
     if half:
         clamped = sum(int(np.count_nonzero(np.abs(values) > HALF_MAX)) for values in channels.values())
         channels = {name: np.clip(values, -HALF_MAX, HALF_MAX).astype(np.float16) for name, values in channels.items()}
@@ -171,6 +212,8 @@ def write_sky_exr(sky: Sky, path, layers=LAYERS, half: bool = False, report=None
     if spectral:  # an RGB-only file does not claim the spectral layout
         header.update({"spectralLayoutVersion": SPECTRAL_LAYOUT_VERSION, "emissiveUnits": EMISSIVE_UNITS,
                        "skyref.radianceUnits": RADIANCE_UNITS})
+    if any(component for _, component in spectral):
+        header.update({"polarisationHandedness": POLARISATION_HANDEDNESS, "skyref.stokesFrame": STOKES_FRAME})
     if sky.scene is not None:
         header["skyref.scene"] = tomli_w.dumps(sky.scene.to_dict())
     with atomic_path(path) as tmp, OpenEXR.File(header, channels) as exr:
@@ -182,7 +225,9 @@ def read_sky_exr(path) -> Sky:
 
     The radiance layer is required (a ParameterError names what the file holds instead);
     radiance, standard error and orders come back as float32 arrays (HALF channels widened),
-    ``orders`` with the order layers the file has (none: empty). Wavelengths are in
+    ``orders`` with the order layers the file has (none: empty). A polarised file (S1-S3
+    channels) gives a polarized sky: ``stokes`` (and ``stokes_error`` with stderr.S1-S3); the
+    derived DoLP and AoLP layers are not read (the sky computes them). Wavelengths are in
     ascending order, or in the scene's order when the file holds a scene with the same set.
     ``directions`` come from the scene's camera (:func:`skyref.projection.pixel_directions`),
     NaN without a scene; ``standard_error`` is NaN when the file has no ``stderr`` layer.
@@ -200,14 +245,14 @@ def read_sky_exr(path) -> Sky:
     except (RuntimeError, OSError, ValueError) as exc:
         raise ParameterError("path", path, "a readable OpenEXR file", f"unreadable: {exc}") from None
 
-    layers: dict[str, dict[float, str]] = {}
+    layers: dict[tuple[str, int], dict[float, str]] = {}       # (layer, Stokes component) -> channels
     for name in pixels:
         match = _CHANNEL.match(name)
-        if match and match["stokes"] == "0":
-            layers.setdefault(match["layer"] or "", {})[_channel_wavelength_nm(match)] = name
-    if "" not in layers:
-        held = [layer for layer, present in (("error", STDERR_LAYER in layers),
-                                             ("orders", any(order in layers for order in ORDER_NAMES)),
+        if match:
+            layers.setdefault((match["layer"] or "", int(match["stokes"])), {})[_channel_wavelength_nm(match)] = name
+    if ("", 0) not in layers:
+        held = [layer for layer, present in (("error", (STDERR_LAYER, 0) in layers),
+                                             ("orders", any((order, 0) in layers for order in ORDER_NAMES)),
                                              ("rgb", {"R", "G", "B"} <= set(pixels))) if present]
         raise ParameterError("path", path, "an emissive spectral OpenEXR (channels S0.<wavelength>nm: the "
                              "radiance layer)", "no spectral channels" +
@@ -222,7 +267,7 @@ def read_sky_exr(path) -> Sky:
     # The channels in ascending wavelength, or, when the scene in the header names exactly the
     # file's channels, in the scene's order and with the scene's exact wavelengths (a name keeps
     # 6 decimals).
-    keys = sorted(layers[""])
+    keys = sorted(layers["", 0])
     wavelengths = np.array(keys)
     if scene is not None:
         by_name = {channel_name(w): w for w in keys}
@@ -231,16 +276,25 @@ def read_sky_exr(path) -> Sky:
             keys = [by_name[channel_name(w)] for w in exact]
             wavelengths = np.array(exact)
 
-    def stack(layer):
-        names = layers[layer]
+    def stack(layer, component=0):
+        names = layers[layer, component]
         if set(names) != set(keys):
+            label = f"{layer}.S{component}" if layer else f"S{component}"
             raise ParameterError("path", path, "the same wavelengths in every layer",
-                                 f"layer {layer!r} has {sorted(names)}")
+                                 f"layer {label!r} has {sorted(names)}")
         return np.stack([pixels[names[k]] for k in keys], axis=-1)
 
+    def stokes(layer, component_0):
+        """(H, W, 4, N) of S0 (given) and the layer's S1-S3, or None without all three."""
+        if not all((layer, c) in layers for c in range(1, len(STOKES))):
+            return None
+        return np.stack([component_0, *(stack(layer, c) for c in range(1, len(STOKES)))], axis=-2)
+
     radiance = stack("")
-    standard_error = stack(STDERR_LAYER) if STDERR_LAYER in layers else np.full_like(radiance, np.nan)
-    orders = {order: stack(order) for order in ORDER_NAMES if order in layers}
+    standard_error = stack(STDERR_LAYER) if (STDERR_LAYER, 0) in layers else np.full_like(radiance, np.nan)
+    orders = {order: stack(order) for order in ORDER_NAMES if (order, 0) in layers}
+    stokes_values = stokes("", radiance)
+    stokes_error = None if stokes_values is None else stokes(STDERR_LAYER, standard_error)
     height, width = radiance.shape[:2]
     if scene is not None:
         if (scene.camera.height, scene.camera.width) != (height, width):
@@ -251,4 +305,5 @@ def read_sky_exr(path) -> Sky:
         directions = np.full((height, width, 3), math.nan)
     metadata = json.loads(str(header.get("skyref.metadata", "{}")))
     return Sky(radiance=radiance, standard_error=standard_error, wavelengths_nm=wavelengths,
-               directions=directions, orders=orders, scene=scene, metadata=metadata)
+               directions=directions, orders=orders, scene=scene, metadata=metadata, stokes=stokes_values,
+               stokes_error=stokes_error)

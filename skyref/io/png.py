@@ -23,7 +23,8 @@ from skyref.io.annotate import draw_overlay
 from skyref.io.atomic import atomic_path
 from skyref.validation import check_number
 
-__all__ = ["EV100_RANGE", "exposure_from_ev100", "ev100_from_exposure", "preview_image", "save_png", "write_png"]
+__all__ = ["EV100_RANGE", "exposure_from_ev100", "ev100_from_exposure", "annotated", "preview_image", "save_png",
+           "write_png"]
 
 #: Accepted exposure values at ISO 100: from a moonless night to beyond the sun's disk.
 EV100_RANGE = (-10.0, 40.0)
@@ -46,6 +47,18 @@ def ev100_from_exposure(exposure: float) -> float:
     return -math.log2(_SATURATION_LUMINANCE_EV0 * exposure)
 
 
+def annotated(image, sky, annotate: bool) -> np.ndarray:
+    """``image`` (H, W, 3) uint8 of ``sky`` with the horizon, N/E/S/W and the sun drawn on it
+    (:func:`skyref.io.annotate.draw_overlay`) if ``annotate``, else ``image``; annotations
+    need a Sky that carries its scene (its camera and sun)."""
+    if not annotate:
+        return image
+    if getattr(sky, "scene", None) is None:
+        raise ParameterError("annotate", True, "a Sky with its scene (camera and sun)",
+                             "nothing to place the annotations with")
+    return draw_overlay(image, sky.scene.camera, sky.scene.sun.direction)
+
+
 def preview_image(sky_or_rgb, exposure: float | None = None, annotate: bool = False) -> np.ndarray:
     """The (H, W, 3) uint8 sRGB preview of a :class:`skyref.sky.Sky` (its spectral radiance
     converted to linear sRGB) or of a linear sRGB array (H, W, 3) in cd m^-2.
@@ -57,20 +70,13 @@ def preview_image(sky_or_rgb, exposure: float | None = None, annotate: bool = Fa
     """
     from skyref.color import tonemap_srgb8  # lazy: see the module docstring
 
-    is_sky = hasattr(sky_or_rgb, "radiance")
-    if annotate and getattr(sky_or_rgb, "scene", None) is None:
-        raise ParameterError("annotate", True, "a Sky with its scene (camera and sun)",
-                             "nothing to place the annotations with")
-    rgb = sky_or_rgb.rgb() if is_sky else np.asarray(sky_or_rgb)
+    rgb = sky_or_rgb.rgb() if hasattr(sky_or_rgb, "radiance") else np.asarray(sky_or_rgb)
     if rgb.ndim != 3 or rgb.shape[2] != 3:
         raise ParameterError("sky_or_rgb", f"array of shape {rgb.shape}", "a Sky or a (height, width, 3) array",
                              "not an RGB image")
     if exposure is not None:
         check_number("exposure", exposure, 0.0, math.inf, lo_open=True)
-    image = tonemap_srgb8(rgb, exposure)
-    if annotate:
-        image = draw_overlay(image, sky_or_rgb.scene.camera, sky_or_rgb.scene.sun.direction)
-    return image
+    return annotated(tonemap_srgb8(rgb, exposure), sky_or_rgb, annotate)
 
 
 def save_png(image, path) -> None:

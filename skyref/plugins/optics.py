@@ -88,6 +88,9 @@ class ConstituentOptics:
         if hasattr(constituent.phase, "cosines"):       # a tabulated phase function's device tables
             self.tables["phase_cosines"] = mi.Float(np.asarray(constituent.phase.cosines, np.float32))
             self.tables["phase_values"] = mi.Float(np.asarray(constituent.phase.values, np.float32))
+        for element in ("p12", "p33", "p34"):              # a tabulated phase matrix's other elements
+            if hasattr(constituent.phase, element):
+                self.tables[f"phase_{element}"] = mi.Float(np.asarray(getattr(constituent.phase, element), np.float32))
 
     # --- coefficients at relative density 1, per channel ----------------------------------------
 
@@ -121,7 +124,9 @@ class ConstituentOptics:
     def phase_matrix(self, mu):
         """The phase matrix's elements (P11, P12, P22, P33, P34, P44), sr^-1
         (:meth:`skyref.atmosphere.phase.PhaseFunction.matrix`)."""
-        return self.model.phase.matrix(mu, xp, **self.phase_parameters())
+        elements = {name: self.tables[f"phase_{name}"] for name in ("p12", "p33", "p34")
+                    if f"phase_{name}" in self.tables}
+        return self.model.phase.matrix(mu, xp, **self.phase_parameters(), **elements)
 
     def sample_cosine(self, u):
         """Sample mu from this component's sampling density; return (mu, pdf(mu) in sr^-1)."""

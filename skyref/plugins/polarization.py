@@ -46,10 +46,9 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-__all__ = ["STOKES", "meridian_frame", "StokesPath", "unpolarized"]
+from skyref.sky import STOKES
 
-#: The Stokes components, in the order of every polarized output axis.
-STOKES = ("I", "Q", "U", "V")
+__all__ = ["STOKES", "meridian_frame", "StokesPath", "unpolarized", "stokes_times"]
 
 
 def meridian_frame(d, up):

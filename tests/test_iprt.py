@@ -1,0 +1,66 @@
+"""Polarized ground truth against the IPRT intercomparison (phase A/B, MYSTIC's results): I, Q,
+U and V of skyref's polarized delta tracking (plane-parallel) against MYSTIC's, direction by
+direction, with their combined standard errors (tests/references/iprt.py: the cases, what is
+set up and what is not, the conventions).
+
+Per setting (case, depolarization, output level, sun): skyref's relative standard error of I
+is sized to ``TARGET`` per direction (64 batches); 99% of the z-scores must be within 3, the
+mean z of I within 4 / sqrt(directions) of 0 (a bias common to a setting), and every z-score
+within ``max_z``: 4 on the CI subset (~900 z-scores: a 6% chance of one false alarm for a
+given set of seeds if both codes were exact), and on every direction (~40,000 z-scores, where
+normal statistics alone put a few beyond 4) the bound that one exact z-score in 100 such runs
+would exceed: 5.0.
+
+- CI: every setting at view zeniths every 30 deg and azimuths every 60 deg (264 directions),
+  target 0.2% (a 1% bias in I is 5 standard errors);
+- ``-m slow``: every direction of the files (13,000), target 0.1% (``benchmarks/iprt.py``
+  writes the same comparison to results/iprt.md).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # `tests.references` under plain pytest
+
+from tests.references import iprt  # noqa: E402
+
+TARGET_CI = 0.002
+TARGET_SLOW = 0.001
+
+SETTINGS = [s for case in iprt.CASES for s in iprt.settings(case)]
+
+
+def _ci_rows(rows):
+    return rows[(rows[:, 4] % 30 == 0) & (rows[:, 5] % 60 == 0) & (rows[:, 5] < 360)]
+
+
+def _check(setting, rows, target, max_z):
+    mean, se, _ = iprt.estimate(setting, rows, target)
+    z = iprt.z_scores(mean, se, rows)
+    lit = rows[:, 6] > 0.0
+    table = "\n".join(f"  va {r[4]:5.1f} phi {r[5]:5.1f}: I {m[0]:.5e}/{r[6]:.5e} Q {m[1]:+.4e}/{r[7]:+.4e} "
+                      f"U {m[2]:+.4e}/{r[8]:+.4e} V {m[3]:+.2e}/{r[9]:+.2e} z " + " ".join(f"{x:+.1f}" for x in zz)
+                      for r, m, zz in zip(rows, mean, z))
+    message = f"{setting.name}:\n{table}"
+    assert np.all(mean[~lit] == 0.0), "light where MYSTIC has none\n" + message
+    assert np.all(se[lit, 0] <= target * mean[lit, 0]), "standard error above target\n" + message
+    assert np.all(np.abs(z) <= max_z), "skyref and MYSTIC disagree\n" + message
+    assert np.mean(np.abs(z[lit]) > 3.0) <= 0.01 or np.sum(np.abs(z[lit]) > 3.0) <= 1, "too many |z| > 3\n" + message
+    assert abs(z[lit, 0].mean()) <= 4.0 / math.sqrt(lit.sum()), "common bias in I\n" + message
+
+
+@pytest.mark.parametrize("setting", SETTINGS, ids=lambda s: s.name.replace(" ", "_"))
+def test_iprt_subset(setting):
+    _check(setting, _ci_rows(setting.rows), TARGET_CI, 4.0)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("setting", SETTINGS, ids=lambda s: s.name.replace(" ", "_"))
+def test_iprt_every_direction(setting):
+    _check(setting, setting.rows, TARGET_SLOW, 5.0)
