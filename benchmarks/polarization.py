@@ -5,9 +5,9 @@ Skies as in ``benchmarks/groundtruth_speed.py`` (bruneton2017; clear, hazy, suns
 observer 1 m above the ground, 128x64 equirectangular, pixel centres), at 440 nm (the bluest
 RGB channel, where Rayleigh scattering and so polarization matter most) and RGB. Per sky: the
 relative difference scalar / polarized I - 1 per pixel (its map as a figure), summarized by
-view zenith and by angle from the sun; the polarized degree of linear polarization; and the
-CPU time to 1% relative RMS error of I (delta tracking both; time x (error / 1%)^2) of the
-polarized mode against the scalar one.
+view zenith and by angle from the sun (from the line-integral estimator, the faster); the
+polarized degree of linear polarization; and, per estimator, the CPU time to 1% relative RMS
+error of I (time x (error / 1%)^2) of the polarized mode against the scalar one.
 
 Usage: ``python benchmarks/polarization.py [--spp N]``; writes ``results/polarization.md``,
 ``results/polarization.json`` and ``results/polarization.png``.
@@ -40,17 +40,31 @@ ZENITH_BANDS = ((0.0, 30.0), (30.0, 60.0), (60.0, 80.0), (80.0, 88.0))
 SUN_BANDS = ((3.0, 30.0), (30.0, 70.0), (70.0, 110.0), (110.0, 180.0))
 
 
-def timed(scene, spp, polarized):
-    render_sky(scene, spp=BATCHES * 2, passes=BATCHES, seed=2, polarized=polarized)      # compile
+ESTIMATORS = ("line_integral", "delta_tracking")
+
+
+def timed(scene, spp, polarized, estimator):
+    # compile first, with the timed render's own launch size
+    render_sky(scene, spp=BATCHES * spp, passes=BATCHES, seed=2, polarized=polarized, estimator=estimator)
     start = time.process_time()
-    sky = render_sky(scene, spp=BATCHES * spp, passes=BATCHES, seed=3, polarized=polarized)
+    sky = render_sky(scene, spp=BATCHES * spp, passes=BATCHES, seed=3, polarized=polarized, estimator=estimator)
     return sky, time.process_time() - start
+
+
+def cost(scene, spp, estimator, mask=None):
+    """(scalar sky, polarized sky, CPU seconds to 1% of each) with ``estimator``."""
+    skies, to_1 = {}, {}
+    for mode in ("scalar", "polarized"):
+        sky, seconds = timed(scene, spp, mode == "polarized", estimator)
+        mask = sky_mask(scene, sky.directions) if mask is None else mask
+        skies[mode], to_1[mode] = sky, seconds * (relative_rms(sky.standard_error, sky.radiance, mask) / 0.01) ** 2
+    return skies["scalar"], skies["polarized"], to_1
 
 
 def compare(sky_name, spp):
     scene = scene_for(sky_name, "rgb")
-    scalar, scalar_seconds = timed(scene, spp, False)
-    polarized, polarized_seconds = timed(scene, spp, True)
+    scalar, polarized, to_1 = cost(scene, spp, "line_integral")
+    costs = {"line_integral": to_1, "delta_tracking": cost(scene, max(16, spp // 8), "delta_tracking")[2]}
     mask = sky_mask(scene, scalar.directions)
     blue = 2                                                       # 440 nm
     i_pol, i_scalar = polarized.radiance[..., blue], scalar.radiance[..., blue]
@@ -66,17 +80,14 @@ def compare(sky_name, spp):
                 "max_abs_rel_diff": float(np.nanmax(np.abs(difference[inside]))) if inside.any() else None}
 
     dolp = polarized.degree_of_linear_polarization()[..., blue]
-    errors = {"scalar": relative_rms(scalar.standard_error, scalar.radiance, mask),
-              "polarized": relative_rms(polarized.standard_error, polarized.radiance, mask)}
-    to_1 = {"scalar": scalar_seconds * (errors["scalar"] / 0.01) ** 2,
-            "polarized": polarized_seconds * (errors["polarized"] / 0.01) ** 2}
     return {"sun_zenith_deg": SKIES[sky_name][1], "turbidity": SKIES[sky_name][0],
             "rms_rel_diff_440nm": float(np.sqrt(np.nanmean(difference ** 2))),
             "median_rel_se_440nm": float(np.nanmedian(np.where(mask, se, np.nan))),
             "by_view_zenith": [band(zenith, lo, hi) for lo, hi in ZENITH_BANDS],
             "by_angle_from_sun": [band(from_sun, lo, hi) for lo, hi in SUN_BANDS],
             "max_dolp_440nm": float(np.nanmax(np.where(mask, dolp, np.nan))),
-            "cpu_seconds_to_1pct": to_1, "polarized_cost_ratio": to_1["polarized"] / to_1["scalar"],
+            "cpu_seconds_to_1pct": costs,
+            "polarized_cost_ratio": {name: c["polarized"] / c["scalar"] for name, c in costs.items()},
             "map": difference}
 
 
@@ -103,14 +114,16 @@ def markdown(report):
     lines = ["# Polarization: what scalar transport gets wrong, and what polarized transport costs", "",
              f"Produced {report['date']} by `python benchmarks/polarization.py {report['arguments']}` on "
              f"{report['machine']} (llvm_ad_rgb, 2 cores shared). Skies of `benchmarks/groundtruth_speed.py`, "
-             "delta tracking, 16 batches, pixel centres; differences at 440 nm over the sky (view zenith < 88 deg, "
-             "> 3 deg from the sun). Map: `polarization.png`.", "",
+             "16 batches, pixel centres; differences from the line-integral estimator at 440 nm over the sky (view "
+             "zenith < 88 deg, > 3 deg from the sun; columns: mean by view zenith). Cost: CPU time to 1% relative "
+             "RMS error of I, polarized / scalar, per estimator (the same run). Map: `polarization.png`.", "",
              "| sky | RMS scalar/polarized - 1 | median s.e. | zenith 0-30 | 30-60 | 60-80 | 80-88 | max DoLP "
-             "| polarized / scalar CPU time to 1% |", "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+             "| cost, line integral | cost, delta tracking |", "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for name, r in report["skies"].items():
         bands = " | ".join(f"{b['mean_rel_diff'] * 100:+.2f}%" for b in r["by_view_zenith"])
         lines.append(f"| {name} | {r['rms_rel_diff_440nm'] * 100:.2f}% | {r['median_rel_se_440nm'] * 100:.2f}% | "
-                     f"{bands} | {r['max_dolp_440nm']:.2f} | {r['polarized_cost_ratio']:.2f}x |")
+                     f"{bands} | {r['max_dolp_440nm']:.2f} | {r['polarized_cost_ratio']['line_integral']:.2f}x | "
+                     f"{r['polarized_cost_ratio']['delta_tracking']:.2f}x |")
     lines += ["", "By angle from the sun (mean scalar / polarized I - 1 at 440 nm):", "",
               "| sky | 3-30 deg | 30-70 | 70-110 | 110-180 |", "|---|---:|---:|---:|---:|"]
     for name, r in report["skies"].items():

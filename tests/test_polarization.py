@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from skyref.atmosphere import Atmosphere, Rayleigh
-from skyref.atmosphere.phase import MiePhase, RayleighPhase, read_mie_table, phase_from_dict
+from skyref.atmosphere.phase import MiePhase, RayleighPhase, mie_lognormal, phase_from_dict, read_mie_table
 from skyref.atmosphere.spectra import ConstantSpectrum
 from skyref.errors import ParameterError
 
@@ -97,3 +97,38 @@ def test_thin_rayleigh_layer_polarizes_as_single_scattering(mi, depolarization):
     np.testing.assert_allclose(u[:3], 0.0, atol=1e-3)
     assert u[3] == pytest.approx(-u[4], abs=1e-3) and abs(u[3]) > 0.1
     assert np.all(image[:, :, 3, :] == 0.0)                                     # no V from Rayleigh
+
+
+def test_mie_lognormal_small_particles_scatter_like_rayleigh():
+    """Particles far smaller than the wavelength (x ~ 0.01) scatter as dipoles: Rayleigh's
+    matrix (depolarization 0), and without absorption all of it."""
+    phase, albedo = mie_lognormal(550.0, 1.33 + 0.0j, 0.0005, 1.2, max_radius_um=0.002, radii=40)
+    mu = np.linspace(-1.0, 1.0, 21)
+    p11, p12, _, p33, p34, _ = phase.matrix(mu)
+    r11, r12, _, r33, _, _ = RayleighPhase().matrix(mu)
+    np.testing.assert_allclose(p11, r11, rtol=2e-3)
+    np.testing.assert_allclose(p12 / p11, r12 / r11, atol=2e-3)
+    np.testing.assert_allclose(p33 / p11, r33 / r11, atol=2e-3)
+    np.testing.assert_allclose(p34 / p11, 0.0, atol=2e-3)
+    assert albedo == pytest.approx(1.0, abs=1e-6)
+
+
+def test_mie_lognormal_has_the_sign_conventions_of_the_iprt_table():
+    """A water-soluble-like aerosol (OPAC's parameters; the table's own size distribution is not
+    stated in the file) has the IPRT table's signs where both are large: P12 < 0 at 60-120 deg
+    (polarized perpendicular to the scattering plane, as Q's sign says), P34 < 0 at 30-60 deg and
+    > 0 at 120-150 deg, and absorbs a little."""
+    phase, albedo = mie_lognormal(350.0, 1.422 + 0.002649j, 0.0262, 2.24, radii=100)
+    table, table_albedo = read_mie_table(WASO)
+    mu = np.cos(np.radians([30.0, 60.0, 90.0, 120.0, 150.0]))
+    for p in (phase, table):
+        p11, p12, _, _, p34, _ = p.matrix(mu)
+        assert np.all(p12[1:4] < 0.0) and np.all(p34[:2] < 0.0) and np.all(p34[3:] > 0.0)
+    assert 0.97 < albedo < 1.0 and 0.97 < table_albedo < 1.0
+
+
+def test_mie_lognormal_refuses_bad_particles():
+    with pytest.raises(ParameterError, match="refractive_index.imag"):
+        mie_lognormal(550.0, 1.5 - 0.01j, 0.1, 2.0)
+    with pytest.raises(ParameterError, match="geometric_std"):
+        mie_lognormal(550.0, 1.5 + 0.01j, 0.1, 1.0)

@@ -168,11 +168,18 @@ def test_the_command_line_refuses_previews_it_cannot_write(scenes, tmp_path, cap
     assert sorted(p.name for p in tmp_path.iterdir()) == ["sky.dolp.png"]
 
 
-def test_the_line_integral_estimator_is_refused(mi):
-    with pytest.raises(ParameterError, match="estimator") as info:
-        render_sky(Scene(camera=Camera(width=8, height=4)), spp=16, passes=4, polarized=True,
-                   estimator="line_integral")
-    assert "delta_tracking" in info.value.valid
+def test_both_estimators_render_stokes_vectors(mi):
+    """The line integral and delta tracking, polarized, on the same small sky: Stokes axes of
+    the same shape, I = the sky's radiance, and their I within their joint noise."""
+    scene = Scene(camera=Camera(width=8, height=4))
+    skies = {name: render_sky(scene, spp=64, passes=4, polarized=True, estimator=name)
+             for name in ("line_integral", "delta_tracking")}
+    for sky in skies.values():
+        assert sky.stokes.shape == (4, 8, 4, 3) and np.array_equal(sky.I, sky.radiance)
+    a, b = skies["line_integral"], skies["delta_tracking"]
+    lit = (a.radiance > 0) & (b.radiance > 0) & np.isfinite(a.radiance)
+    z = (a.radiance - b.radiance)[lit] / np.hypot(a.standard_error, b.standard_error)[lit]
+    assert lit.sum() > 30 and np.median(np.abs(z)) < 2.0
 
 
 def test_a_batch_refuses_a_polarized_base_scene(tmp_path, capsys):

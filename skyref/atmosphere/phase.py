@@ -40,7 +40,7 @@ from skyref.errors import ParameterError
 
 __all__ = ["rayleigh_phase", "cornette_shanks_phase", "henyey_greenstein_phase", "sample_rayleigh_cosine",
            "sample_henyey_greenstein_cosine", "cornette_shanks_asymmetry", "PhaseFunction", "RayleighPhase", "MiePhase",
-           "read_mie_table",
+           "read_mie_table", "mie_lognormal",
            "CornetteShanks", "HenyeyGreenstein", "TabulatedPhase", "PHASE_TYPES", "phase_from_dict"]
 
 INV_4PI = 1.0 / (4.0 * math.pi)
@@ -337,6 +337,48 @@ def read_mie_table(path) -> tuple:
     elements = [np.interp(cosines, mu, p) for mu, p in grids]
     return MiePhase(tuple(cosines), tuple(elements[0]), tuple(elements[1]), tuple(elements[2]),
                     tuple(elements[3])), albedo
+
+
+def mie_lognormal(wavelength_nm: float, refractive_index: complex, mode_radius_um: float, geometric_std: float,
+                  max_radius_um: float = 5.0, radii: int = 400, cosines: int = 721) -> tuple:
+    """A :class:`MiePhase` and the single-scattering albedo of spheres whose number density
+    follows a lognormal distribution, dN/dln r ~ exp(-(ln r - ln r_mode)^2 / (2 ln^2 sigma)),
+    up to ``max_radius_um``, at one wavelength, by Mie theory (miepython; Bohren & Huffman's
+    amplitudes S1, S2: P11 = (|S1|^2 + |S2|^2) / 2, P12 = (|S2|^2 - |S1|^2) / 2,
+    P33 = Re(S2 S1*), P34 = Im(S2 S1*), each weighted by the particles' scattering cross
+    sections). ``refractive_index`` n + i k of the particles relative to the air, k >= 0 for
+    absorbing ones (e.g. OPAC's water-soluble aerosol at 50% humidity, 350 nm: 1.422 + 0.00265i,
+    mode radius 0.0262 um, sigma 2.24). The matrix is tabulated at ``cosines`` points uniform in
+    the scattering angle; the sizes are integrated in ln r with ``radii`` points."""
+    import miepython
+
+    index = complex(refractive_index)
+    check_number("wavelength_nm", wavelength_nm, 100.0, 100_000.0)
+    check_number("refractive_index.real", index.real, 1.0, 5.0, lo_open=True)
+    check_number("refractive_index.imag", index.imag, 0.0, 10.0)
+    check_number("mode_radius_um", mode_radius_um, 1e-4, 100.0)
+    check_number("geometric_std", geometric_std, 1.0, 5.0, lo_open=True)
+    check_number("max_radius_um", max_radius_um, mode_radius_um, 1000.0, lo_open=True)
+    log_sigma = math.log(geometric_std)
+    log_r = np.linspace(math.log(mode_radius_um) - 5.0 * log_sigma, math.log(max_radius_um), int(radii))
+    number = np.exp(-0.5 * ((log_r - math.log(mode_radius_um)) / log_sigma) ** 2)
+    weights = number * np.gradient(log_r)                          # dN per ln r step
+    theta = np.linspace(math.pi, 0.0, int(cosines))
+    mu = np.cos(theta)
+    mu[0], mu[-1] = -1.0, 1.0
+    elements = np.zeros((4, mu.size))
+    scattering = extinction = 0.0
+    for r, w in zip(np.exp(log_r), weights):
+        x = 2.0 * math.pi * r / (wavelength_nm * 1e-3)
+        m = complex(index.real, -index.imag)                      # miepython's sign of k
+        q_ext, q_sca, _, _ = miepython.efficiencies_mx(m, x)
+        s1, s2 = miepython.S1_S2(m, x, mu, norm="qsca")           # integrates to Q_sca over the sphere
+        area = w * math.pi * r * r
+        elements += area * np.array([0.5 * (abs(s1) ** 2 + abs(s2) ** 2), 0.5 * (abs(s2) ** 2 - abs(s1) ** 2),
+                                     (s2 * np.conj(s1)).real, (s2 * np.conj(s1)).imag])
+        scattering += area * q_sca
+        extinction += area * q_ext
+    return MiePhase(tuple(mu), *(tuple(e) for e in elements)), scattering / extinction
 
 
 PHASE_TYPES = {cls.kind: cls for cls in (RayleighPhase, CornetteShanks, HenyeyGreenstein, TabulatedPhase, MiePhase)}

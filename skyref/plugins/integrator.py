@@ -18,6 +18,15 @@ twilight (9e-4); see ``results/groundtruth_speed.md`` for its speed and ``docs/d
 why it is built so.
 Scenes with objects use delta tracking.
 
+**Polarization** (``polarized``, opt-in): both estimators then transport Stokes vectors. A path
+carries its Mueller matrix as the scalar throughput w, updated exactly as in scalar transport,
+times a matrix N with N00 = 1 (:class:`~skyref.plugins.polarization.StokesPath`): each
+scattering multiplies it by a rotation and the local phase matrix, a ground reflection
+depolarizes, and the sunlight gathered at a vertex or along a segment is mapped by it into the
+camera's meridian frame (conventions: :mod:`skyref.plugins.polarization`). Every output then has
+a Stokes axis (I, Q, U, V). Scalar renders compile none of it. Validated against MYSTIC on the
+IPRT cases (tests/test_iprt.py, ``results/iprt.md``).
+
 The delta-tracking estimator, per camera sample:
 
 * **Wavelengths.** A path carries K channels (indices into the wavelength grid of N values):
@@ -275,8 +284,8 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
     default ``bruneton2017``), ``wavelengths`` (string: comma-separated nm, or ``rgb``),
     ``sun_zenith``/``sun_azimuth`` (degrees), ``sun_angular_radius`` (degrees),
     ``limb_darkening`` (bool), ``observer_altitude`` (m), ``geometry`` (``spherical`` or
-    ``plane_parallel``), ``polarized`` (bool: Stokes vectors, :mod:`skyref.plugins.polarization`;
-    delta tracking only), ``max_depth`` (int), ``wavelengths_per_path`` (int, default: all N; fewer
+    ``plane_parallel``), ``polarized`` (bool: Stokes vectors, :mod:`skyref.plugins.polarization`),
+    ``max_depth`` (int), ``wavelengths_per_path`` (int, default: all N; fewer
     channels per path are cheaper per sample but noisier per wavelength — on the 48-wavelength
     default sky, carrying all of them was 3x more efficient than 16).
 
@@ -307,9 +316,6 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         check_choice("geometry", geometry, ("spherical", "plane_parallel"))
         self.estimator = check_choice("estimator", estimator, ESTIMATORS)
         self.polarized = bool(check_choice("polarized", polarized, (False, True)))
-        if self.polarized and self.estimator != "delta_tracking":
-            raise ParameterError("estimator", self.estimator, "'delta_tracking' when polarized",
-                                 "the line-integral estimator transports radiance only (scalar)")
         #: Values per channel in every output: the Stokes components I, Q, U, V, or radiance.
         self.stokes = len(STOKES) if self.polarized else 1
         self.optics = AtmosphereOptics(atmosphere, wavelengths_nm)
@@ -334,7 +340,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
                                   if c.profile.kind == "exponential"), default=math.inf)
         if self.estimator == "line_integral":
             self.line = LineIntegral(self.optics, self.geometry, SunOpticalDepth(atmosphere, self.geometry),
-                                     panel_levels(atmosphere))
+                                     panel_levels(atmosphere), polarized=self.polarized)
         #: Optional Mitsuba scene whose shapes stand in the atmosphere (terrain, buildings):
         #: Lambertian, grey albedo = the mean of their BSDF's diffuse reflectance. Objects are
         #: traced by the delta-tracking estimator (the line integral assumes open sky).
@@ -657,29 +663,34 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         e_sun = self.sun.channel_irradiance(indices)
         d = mi.Vector3f(direction)
         p, h, misses = self._enter_atmosphere(origin, d, active)
-        radiance = RadianceByOrder.zeros(channels.count)
+        radiance = RadianceByOrder.zeros(channels.count, self.stokes)
         if orders != "multiple":
             radiance.direct = dr.select(misses, e_sun * self._solar_disk(d), radiance.direct)
         camera = PathVertex(p, h, d, channels.zeros() + 1.0, mi.UInt32(0), mi.Bool(active) & ~misses)
+        # Polarized: the path's Mueller matrix (w N, polarization.py) starts in the camera's frame.
+        stokes = StokesPath.camera(d, self.geometry.up(mi.Point3f(origin)), channels.count) if self.polarized else None
 
-        light, sun_disk, path = self._line_segment(sampler, channels, e_sun, camera, camera=True,
-                                                   rising_only=self.geometry.h0 == 0.0,
-                                                   sunlight=None if orders == "multiple" else "quadrature")
+        light, sun_disk, path, stokes = self._line_segment(sampler, channels, e_sun, camera, stokes, camera=True,
+                                                           rising_only=self.geometry.h0 == 0.0,
+                                                           sunlight=None if orders == "multiple" else "quadrature")
         radiance.direct += sun_disk
         radiance.single += light
         if orders != "single":
-            self._scattered_light(sampler, channels, e_sun, path, radiance)
-        return radiance.by_order()
+            self._scattered_light(sampler, channels, e_sun, path, stokes, radiance)
+        orders = radiance.by_order()
+        # the solar disk seen through the atmosphere is unpolarized
+        return [unpolarized(orders[0]), *orders[1:]] if self.polarized else orders
 
     @dr.syntax
-    def _scattered_light(self, sampler, channels, e_sun, path, radiance):
-        """Orders 2 and >= 3 of a line-integral ``path`` that goes on from its first vertex
-        (depth 1), added to ``radiance``: one loop iteration per segment."""
+    def _scattered_light(self, sampler, channels, e_sun, path, stokes, radiance):
+        """Orders 2 and >= 3 of a line-integral ``path`` (and its :class:`StokesPath` when
+        polarized, else None) that goes on from its first vertex (depth 1), added to
+        ``radiance``: one loop iteration per segment."""
         path.alive &= path.depth < self.max_depth
 
         while dr.hint(path.alive, label="atmosphere line-integral path"):
-            light, _, path = self._line_segment(sampler, channels, e_sun, path, camera=False, rising_only=False,
-                                                sunlight="sampled")
+            light, _, path, stokes = self._line_segment(sampler, channels, e_sun, path, stokes, camera=False,
+                                                        rising_only=False, sunlight="sampled")
             radiance.file(path.depth, light, True)      # scattered (or reflected) path.depth times
             # Russian roulette once the largest channel throughput falls below LINE_ROULETTE_THROUGHPUT
             survival = dr.minimum(dr.max(dr.detach(path.throughput), axis=0) / LINE_ROULETTE_THROUGHPUT, 1.0)
@@ -688,11 +699,13 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             path.throughput = dr.select(roulette & survives, path.throughput / survival, path.throughput)
             path.alive &= ~(roulette & ~survives) & (path.depth < self.max_depth)
 
-    def _line_segment(self, sampler, channels, e_sun, path, camera, rising_only, sunlight="quadrature"):
-        """One segment of a line-integral ``path`` (a :class:`PathVertex`) from its vertex along
-        its direction. Returns (the light gathered along the segment: sunlight scattered once on
-        it, or reflected by the ground at its end, so path.depth + 1 events; the solar disk seen
-        through it when ``camera``; the path at its next vertex, one event deeper). ``sunlight``:
+    def _line_segment(self, sampler, channels, e_sun, path, stokes, camera, rising_only, sunlight="quadrature"):
+        """One segment of a line-integral ``path`` (a :class:`PathVertex`, with its
+        :class:`StokesPath` ``stokes`` when polarized, else None) from its vertex along its
+        direction. Returns (the light gathered along the segment: sunlight scattered once on it,
+        or reflected by the ground at its end, so path.depth + 1 events: radiance, or Stokes
+        vectors; the solar disk seen through it when ``camera``; the path at its next vertex,
+        one event deeper; its StokesPath there). ``sunlight``:
         the segment's scattered sunlight by ``"quadrature"`` or ``"sampled"`` at
         ``SAMPLED_SUNLIGHT_POINTS`` points (:meth:`LineIntegral.sampled_sunlight`), or None: not
         computed (the light is 0), only where the path goes on."""
@@ -708,12 +721,18 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             channels, p, d, h, length, sun_direction, grey, rising_only, sunlight)
         ground = p + length * d
         up = geometry.up(ground)
-        light, sun_disk = channels.zeros(), channels.zeros()
+        light, sun_disk = RadianceByOrder.zeros(channels.count, self.stokes).single, channels.zeros()
         if sunlight is not None:
             if sunlight == "sampled":
                 scattered = self.line.sampled_sunlight(channels, quadrature, p, d, sun_direction, sampler.next_1d(),
                                                        SAMPLED_SUNLIGHT_POINTS)
-            light = throughput * scattered * e_sun * sun_factor
+            intensity = mi.ArrayXf([scattered[k] for k in range(channels.count)])
+            light = throughput * intensity * e_sun * sun_factor
+            if self.polarized:
+                # the segment's scattered sunlight, (P11, P12) parts, through the path's matrix
+                linear = mi.ArrayXf([scattered[channels.count + k] for k in range(channels.count)])
+                light = stokes_times(stokes.scattered_source(sun_direction, d, [linear * dr.rcp(
+                    dr.maximum(intensity, 1e-30))]), light)
             if camera:
                 sun_disk = dr.select(alive & ~on_ground, throughput * transmittance * e_sun * self._solar_disk(d),
                                      sun_disk)
@@ -723,6 +742,8 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             tau_sun = self.line.sun_depth(mi.Float(0.0), cos_sun)
             reflected = (throughput * transmittance * channels.albedo * e_sun * sun_factor
                          * dr.exp(-channels.optical_depth(tau_sun)) * (dr.maximum(cos_sun, 0.0) / math.pi))
+            if self.polarized:
+                reflected = stokes_times(stokes.unpolarized_source(), reflected)
             light += dr.select(on_ground & (cos_sun > 0.0), reflected, 0.0)
             light = dr.select(alive, light, 0.0)
 
@@ -739,13 +760,18 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         x, hx, weight, (parts, sigma_s, _) = self.line.sample_collision(channels, quadrature, p, d, u_air)
         u_direction = mi.Point2f(vertex_sample.y, vertex_sample.z)
         d_air, phase_weight = self._scatter_direction(parts, sigma_s, d, sampler.next_1d(), u_direction)
+        if self.polarized:
+            _, reduced = self.optics.phase_matrix(parts, sigma_s, dr.clip(dr.dot(d, d_air), -1.0, 1.0))
+            stokes, factor = stokes.scatter(d_air, d, reduced, in_air)
+            stokes = stokes.reflect(~in_air)
+            phase_weight = phase_weight * factor
         air_throughput = throughput * weight * phase_weight / dr.maximum(p_air, 1e-30)
         d_ground = mi.Frame3f(up).to_world(mi.warp.square_to_cosine_hemisphere(u_direction))
         ground_throughput = throughput * transmittance * channels.albedo / dr.maximum(1.0 - p_air, 1e-30)
         next_vertex = PathVertex(dr.select(in_air, x, ground), dr.select(in_air, hx, 0.0),
                                  dr.select(in_air, d_air, d_ground),
                                  dr.select(in_air, air_throughput, ground_throughput), path.depth + 1, alive)
-        return light, sun_disk, next_vertex
+        return light, sun_disk, next_vertex, stokes
 
     def _scatter_direction(self, parts, sigma_s, d, u_choice, u_direction):
         """The direction a line-integral path takes at a scattering event (incident direction d)

@@ -127,12 +127,22 @@ class LineIntegral:
     ``optics`` of an atmosphere in ``geometry``, with the sun's optical depth ``sun_depth``
     and the interior panel altitudes ``levels`` (m)."""
 
-    def __init__(self, optics, geometry, sun_depth, levels, nodes_per_panel: int = NODES_PER_PANEL):
+    def __init__(self, optics, geometry, sun_depth, levels, nodes_per_panel: int = NODES_PER_PANEL,
+                 polarized: bool = False):
         self.optics = optics
         self.geometry = geometry
         self.sun_depth = sun_depth
         self.levels = tuple(float(x) for x in levels)
         self.rule = GaussLegendreRule(nodes_per_panel)
+        #: Polarized: the scattered sunlight comes as its P11 and P12 parts (:meth:`_phase_elements`).
+        self.polarized = bool(polarized)
+
+    def _phase_elements(self, channels, cos_scatter):
+        """Per constituent (None for an absorber), the phase-matrix elements the scattered
+        sunlight needs at ``cos_scatter``: (P11,), or (P11, P12) when polarized (unpolarized
+        sunlight scattered by F is F (1, 0, 0, 0)^T = (P11, P12, 0, 0)^T)."""
+        return [None if s is None else (c.phase_matrix(cos_scatter)[:2] if self.polarized else (c.phase(cos_scatter),))
+                for c, (s, _) in zip(self.optics.components, channels.coefficients)]
 
     # --- the segment's panels ----------------------------------------------------------------
 
@@ -176,7 +186,9 @@ class LineIntegral:
 
     def integrate(self, channels, p, d, h, length, sun, grey, rising_only=False, sunlight="quadrature"):
         """Single-scattered sunlight along the segment per channel (ArrayXf, to be multiplied by
-        E_sun), its transmittance T(0, L) per channel, and the :class:`SegmentQuadrature`.
+        E_sun; polarized: 2 K values, its P11 part, the radiance, then its P12 part, which is Q
+        in the scattering plane's frame), its transmittance T(0, L) per channel, and the
+        :class:`SegmentQuadrature`.
         ``grey``: the path's :class:`GreyProxy`, for the forced collision's proxy.
         ``rising_only``: the caller guarantees the segment never descends (a ray leaving the
         ground). ``sunlight``:
@@ -188,11 +200,9 @@ class LineIntegral:
         optics, rule = self.optics, self.rule
         components = optics.components
         panels, lit = self._panels(channels, p, d, h, length, sun, rising_only, sunlight)
-        cos_scatter = dr.dot(d, sun)
-        phase = [None if s is None else c.phase(cos_scatter)
-                 for c, (s, _) in zip(components, channels.coefficients)]
+        phase = self._phase_elements(channels, dr.dot(d, sun))
         extinction = channels.extinction
-        light = channels.zeros()
+        light = [channels.zeros() for _ in range(2 if self.polarized else 1)]
         prefix = [mi.Float(0.0) for _ in components]
         prefixes, masses, maps = [], [], []
         for (a, b), panel_lit in zip(panels, lit):
@@ -219,13 +229,15 @@ class LineIntegral:
                 if sunlight == "quadrature":
                     tau_sun = self.sun_depth(hx, dr.dot(self.geometry.up(x), sun))
                     exponent = channels.zeros()
-                    source = channels.zeros()
+                    sources = [channels.zeros() for _ in light]
                     for c in range(len(components)):
                         if extinction[c] is not None:
                             exponent = exponent + extinction[c] * (tau[c] + tau_sun[c])
                         if phase[c] is not None:
-                            source = source + channels.coefficients[c][0] * (rho[c] * phase[c])
-                    light = light + source * dr.exp(-exponent) * dr.select(panel_lit, weight, 0.0)
+                            sources = [source + channels.coefficients[c][0] * (rho[c] * element)
+                                       for source, element in zip(sources, phase[c])]
+                    attenuation = dr.exp(-exponent) * dr.select(panel_lit, weight, 0.0)
+                    light = [part + source * attenuation for part, source in zip(light, sources)]
                 # grey proxy of sigma_s(t) T(0, t), for the forced collision
                 mass = mass + weight * dr.detach(grey_sum(grey.scattering, rho) * grey.transmittance(tau))
             masses.append(mass)
@@ -233,6 +245,7 @@ class LineIntegral:
                       for c in range(len(components))]
         transmittance = dr.exp(-channels.optical_depth(prefix))
         lit_masses = None if sunlight is None else [dr.select(on, m, 0.0) for on, m in zip(lit, masses)]
+        light = mi.ArrayXf([value for part in light for value in part])
         return light, transmittance, SegmentQuadrature(panels, maps, prefixes, prefix, masses, lit_masses)
 
     def _panel_map(self, channels, p, d, a, width):
@@ -292,10 +305,11 @@ class LineIntegral:
         The phase function is constant along the segment and sigma_s T is what the points are
         drawn by, so the estimate varies only with the sun's transmittance (and the channels'
         departure from the grey proxy): a few points carry a segment, at one sun lookup each,
-        where the quadrature pays one per node. Segments with no lit mass give 0."""
+        where the quadrature pays one per node. Segments with no lit mass give 0. Polarized: 2 K
+        values, as :meth:`integrate`'s."""
         lit_total = sum(quadrature.lit_masses, mi.Float(0.0))
         cos_scatter = dr.dot(d, sun)
-        light = channels.zeros()
+        light = mi.ArrayXf([mi.Float(0.0) for _ in range((2 if self.polarized else 1) * channels.count)])
         for k in range(points):
             u_k = u + k / points
             u_k = dr.minimum(dr.select(u_k >= 1.0, u_k - 1.0, u_k), 1.0 - 2.0 ** -24)
@@ -304,6 +318,11 @@ class LineIntegral:
             # a point of a lit panel can still fall a rounding error into the shadow
             lit = self.geometry.distance_to_ground(x, sun, hx) == dr.inf
             tau_sun = self.sun_depth(hx, dr.dot(self.geometry.up(x), sun))
-            light += dr.select(lit, weight * self.optics.phase(parts, sigma_s, cos_scatter)
-                               * dr.exp(-channels.optical_depth(tau_sun)), 0.0)
+            arriving = weight * dr.exp(-channels.optical_depth(tau_sun))
+            if self.polarized:
+                phase, reduced = self.optics.phase_matrix(parts, sigma_s, cos_scatter)
+                arriving = mi.ArrayXf([*(arriving * phase), *(arriving * phase * reduced[0])])
+            else:
+                arriving = arriving * self.optics.phase(parts, sigma_s, cos_scatter)
+            light += dr.select(lit, arriving, 0.0)
         return dr.select(lit_total > 0.0, light * (1.0 / points), 0.0)

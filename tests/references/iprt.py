@@ -166,7 +166,12 @@ def directions(rows: np.ndarray) -> np.ndarray:
     return direction_from_angles(va, rows[:, 5])
 
 
-def integrator(setting: Setting):
+#: skyref's estimators, both polarized: the line integral (the default here: ~10x faster to a
+#: given error on these cases) and delta tracking, independent of each other.
+ESTIMATORS = ("line_integral", "delta_tracking")
+
+
+def integrator(setting: Setting, estimator: str = "line_integral"):
     """skyref's polarized integrator for the setting (plane-parallel; Mitsuba loaded)."""
     from skyref.plugins import load_mitsuba
 
@@ -177,7 +182,7 @@ def integrator(setting: Setting):
     atm = atmosphere(setting)
     scene = Scene(atmosphere=atm, sun=Sun(setting.sun_zenith_deg, setting.sun_azimuth_deg),
                   observer=Observer(observer_altitude_m(setting)), wavelengths=[WAVELENGTH_NM[setting.case]])
-    return build_integrator(scene, geometry="plane_parallel", polarized=True)
+    return build_integrator(scene, geometry="plane_parallel", polarized=True, estimator=estimator)
 
 
 def _stokes(integrator_, setting, wavefront, seed, spp, batches):
@@ -206,13 +211,13 @@ MAX_REPEATS = 1 << 14
 MAX_LANES = 1 << 24
 
 
-def estimate(setting: Setting, rows: np.ndarray, target: float, seed: int = 0):
+def estimate(setting: Setting, rows: np.ndarray, target: float, seed: int = 0, estimator: str = "line_integral"):
     """skyref's Stokes vectors (I, Q, U, V per unit beam-normal irradiance, sr^-1) for ``rows``
     of ``setting``, with their standard errors from BATCHES batches: (mean (M, 4), se (M, 4),
     samples per direction). A pilot run estimates each direction's variance of I and sizes the
     main run, which repeats each direction so that I's relative standard error is about
     ``target``; directions still above it get more repetitions from the main run's own spread."""
-    it = integrator(setting)
+    it = integrator(setting, estimator)
     d = directions(rows)
     pilot = _stokes(it, setting, d, seed + 1_000_003, PILOT_SPP, BATCHES)[..., 0]
     sums = np.zeros((BATCHES, len(d), 4))
