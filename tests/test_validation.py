@@ -112,8 +112,11 @@ def test_unknown_phase_key():
     data["constituents"]["aerosol"]["phase"] = {"type": "cornette_shanks", "gg": 0.5}
     with raises_named("phase.gg"):
         Atmosphere.from_dict(data)
-    data["constituents"]["aerosol"]["phase"] = {"type": "mie"}
+    data["constituents"]["aerosol"]["phase"] = {"type": "fournier_forand"}
     with raises_named("phase.type"):
+        Atmosphere.from_dict(data)
+    data["constituents"]["aerosol"]["phase"] = {"type": "mie", "cosines": [-1.0, 1.0]}
+    with raises_named("phase.values"):
         Atmosphere.from_dict(data)
 
 
