@@ -8,8 +8,8 @@ standard errors, the RMS relative difference of I, and the CPU time. Then, on ca
 Rayleigh layer of optical thickness 0.5, sun at the zenith), scalar transport's I against the
 polarized I by view zenith, the difference the issue measured with DISORT.
 
-Usage: ``python benchmarks/iprt.py [--stride K] [--target T]`` (every K-th row of each file;
-default every row at 0.1%); writes ``results/iprt.md`` and ``results/iprt.json``
+Usage: ``python benchmarks/iprt.py [--stride K] [--target T] [--cases a1,b2,...]`` (every K-th
+row of each file, of the given cases; default every row of every case at 0.1%); writes ``results/iprt.md`` and ``results/iprt.json``
 (``{"cases": {name: {"max_abs_z": ..., "rms_rel_diff_I": ..., ...}}}``).
 """
 
@@ -101,10 +101,14 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--stride", type=int, default=1, help="every K-th row of each result file")
     parser.add_argument("--target", type=float, default=0.001, help="relative standard error of I")
+    parser.add_argument("--cases", default=",".join(iprt.CASES), help="comma-separated IPRT cases")
     args = parser.parse_args()
+    unknown = sorted(set(args.cases.split(",")) - set(iprt.CASES))
+    if unknown:
+        parser.error(f"--cases: {', '.join(unknown)} not among {', '.join(iprt.CASES)}")
     report = {"date": datetime.datetime.now().isoformat(timespec="minutes"), "machine": platform.processor() or
               platform.machine(), "arguments": " ".join(sys.argv[1:]), "target": args.target, "cases": {}}
-    for case in iprt.CASES:
+    for case in args.cases.split(","):
         for setting in iprt.settings(case):
             rows = setting.rows[::args.stride]
             report["cases"][setting.name] = compare(setting, rows, args.target)

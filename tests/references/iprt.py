@@ -75,7 +75,9 @@ class Setting:
     @property
     def name(self) -> str:
         depol = f" depol {self.depolarization:g}" if self.case == "a1" else ""
-        return f"{self.case.upper()}{depol} z {self.zout_km:g} km"
+        level = (("bottom" if self.zout_km == 0.0 else "top") if self.case.startswith("a")
+                 else f"{self.zout_km:g} km")
+        return f"{self.case.upper()}{depol} {level}"
 
 
 @functools.lru_cache(maxsize=None)
