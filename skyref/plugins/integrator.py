@@ -195,14 +195,11 @@ class RadianceByOrder:
         self.direct, self.single, self.double, self.higher = direct, single, double, higher
 
     @staticmethod
-    def zeros(channels: int, stokes: int = 1):
-        """Nothing gathered yet: K ``channels`` values for the solar disk (unpolarized), and
-        ``stokes`` x K for each scattering order (radiance, or I, Q, U, V)."""
-        def zero(size):
-            return mi.ArrayXf([mi.Float(0.0)] * size)
-
-        return RadianceByOrder(zero(channels), zero(stokes * channels), zero(stokes * channels),
-                               zero(stokes * channels))
+    def zeros(channels, stokes: int = 1):
+        """Nothing gathered yet: K values (:class:`PathChannels` ``channels``) for the solar disk
+        (unpolarized), and ``stokes`` x K for each scattering order (radiance, or I, Q, U, V)."""
+        return RadianceByOrder(channels.zeros(), channels.zeros(stokes), channels.zeros(stokes),
+                               channels.zeros(stokes))
 
     def file(self, order, light, active):
         """Add ``light`` under scattering order ``order`` (1, 2, or 3 and more) where ``active``."""
@@ -663,7 +660,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         e_sun = self.sun.channel_irradiance(indices)
         d = mi.Vector3f(direction)
         p, h, misses = self._enter_atmosphere(origin, d, active)
-        radiance = RadianceByOrder.zeros(channels.count, self.stokes)
+        radiance = RadianceByOrder.zeros(channels, self.stokes)
         if orders != "multiple":
             radiance.direct = dr.select(misses, e_sun * self._solar_disk(d), radiance.direct)
         camera = PathVertex(p, h, d, channels.zeros() + 1.0, mi.UInt32(0), mi.Bool(active) & ~misses)
@@ -721,7 +718,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             channels, p, d, h, length, sun_direction, grey, rising_only, sunlight)
         ground = p + length * d
         up = geometry.up(ground)
-        light, sun_disk = RadianceByOrder.zeros(channels.count, self.stokes).single, channels.zeros()
+        light, sun_disk = channels.zeros(self.stokes), channels.zeros()
         if sunlight is not None:
             if sunlight == "sampled":
                 scattered = self.line.sampled_sunlight(channels, quadrature, p, d, sun_direction, sampler.next_1d(),
@@ -810,7 +807,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         channels = optics.channel_coefficients(indices)
         e_sun = sun.channel_irradiance(indices)
         polarized = self.polarized
-        radiance = RadianceByOrder.zeros(channels.count, self.stokes)
+        radiance = RadianceByOrder.zeros(channels, self.stokes)
 
         # -- the camera ray; an observer above the atmosphere first moves to where it enters ------
         d = mi.Vector3f(direction)
@@ -822,7 +819,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         path = PathVertex(p, h, d, channels.zeros() + 1.0, mi.UInt32(0), mi.Bool(active) & ~misses)
         segment = self._segment(p, d, h)
         shadow = ShadowRay(mi.Bool(False), mi.Point3f(p), mi.Float(h), mi.Vector3f(d), mi.Float(0.0),
-                           channels.zeros(), radiance.single, mi.UInt32(0))
+                           channels.zeros(), channels.zeros(self.stokes), mi.UInt32(0))
 
         while dr.hint(path.alive | shadow.active, label="atmosphere path"):
             # -- one tracking step along the current ray (the shadow ray if one is in flight) ----

@@ -304,8 +304,9 @@ class PathChannels:
         #: the smallest extinction over the channels per component (detached; None for a zero term)
         self.least = [None if k is None else dr.detach(dr.min(k, axis=0)) for k in self.extinction]
 
-    def zeros(self):
-        return mi.ArrayXf([mi.Float(0.0)] * self.count)
+    def zeros(self, components: int = 1):
+        """Zeros per channel, ``components`` x K values (e.g. the 4 Stokes components)."""
+        return mi.ArrayXf([mi.Float(0.0)] * (components * self.count))
 
     def optical_depth(self, unit_depths):
         """Optical depth per channel from per-component optical depths at relative density 1
