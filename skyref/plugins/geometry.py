@@ -19,6 +19,8 @@ term from float64; sphere intersections use C = r^2 - rho^2 factored as (h - s)(
 
 from __future__ import annotations
 
+import math
+
 import drjit as dr
 import mitsuba as mi
 
@@ -109,16 +111,36 @@ class SphericalShell:
         :func:`skyref.plugins.quadrature.level_crossings`)."""
         return quadrature.level_crossings(self._radial_projection(p, d), h, level, self.R, xp)
 
+    def sun_can_graze(self, sun_zenith_deg: float) -> bool:
+        """Whether a ray to the sun (zenith angle ``sun_zenith_deg`` at the observer) from a
+        point of a ray from the observer can pass below that point: where the sun is below
+        that point's horizon. The points are within arccos(R / (R + h0)) + arccos(R / (R + H))
+        of arc of the observer (out to the top over the horizon), or anywhere for an observer
+        above the atmosphere."""
+        if self.h0 >= self.H:
+            return True
+        arc = math.acos(self.R / (self.R + max(self.h0, 0.0))) + math.acos(self.R / (self.R + self.H))
+        return sun_zenith_deg + math.degrees(arc) > 90.0
+
     def shadow_interval(self, p, d, length, sun):
         """[t_in, t_out] within [0, length] where p + t d lies in the planet's shadow for the
         sun direction ``sun`` (unit): inside the cylinder of radius R behind the planet. A line
         meets that convex region in one interval; none gives t_in = t_out = length."""
+        return self.grazing_interval(p, d, length, sun, 0.0)
+
+    def grazing_interval(self, p, d, length, sun, tangent_altitude):
+        """[t_in, t_out] within [0, length] where the ray to the sun from p + t d passes below
+        ``tangent_altitude`` (m): inside the cylinder of radius R + tangent_altitude around the
+        sun's axis, behind the plane through the planet's centre normal to ``sun`` (in front of
+        it the ray to the sun only rises). At 0 this is the planet's shadow. A line meets that
+        convex region in one interval; none gives t_in = t_out = length."""
+        radius = self.R + tangent_altitude
         e = mi.Vector3f(p.x, p.y, p.z + self._centre)      # from the planet's centre
         e_along, d_along = dr.dot(e, sun), dr.dot(d, sun)
         e_perp, d_perp = e - e_along * sun, d - d_along * sun
         a = dr.squared_norm(d_perp)
         b = dr.dot(e_perp, d_perp)
-        c = dr.squared_norm(e_perp) - self.R * self.R
+        c = dr.squared_norm(e_perp) - radius * radius
         disc = b * b - a * c
         root = dr.sqrt(dr.maximum(disc, 0.0))
         inv_a = dr.rcp(dr.maximum(a, 1e-12))
@@ -170,4 +192,12 @@ class PlaneParallelSlab:
     def shadow_interval(self, p, d, length, sun):
         """A flat ground casts no shadow in the air (a sun below the horizon lights nothing:
         its optical depth is infinite)."""
+        return mi.Float(length), mi.Float(length)
+
+    def sun_can_graze(self, sun_zenith_deg: float) -> bool:
+        """Rays to the sun never pass below the point they leave from."""
+        return False
+
+    def grazing_interval(self, p, d, length, sun, tangent_altitude):
+        """Rays to the sun never pass below the point they leave from: no interval."""
         return mi.Float(length), mi.Float(length)

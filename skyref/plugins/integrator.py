@@ -13,8 +13,9 @@ sun lookup each, where the quadrature pays one per node), so orders >= 2 stay un
 Carlo, drawn from scrambled Sobol points (:mod:`skyref.plugins.sobol`), with a sun lobe among
 the scattering directions where there is aerosol. For a fixed camera direction the camera
 segment's light is traced apart, once per few paths. Its quadrature is within 1e-4 of a refined
-one on clear skies up to the horizon, not yet on optically thick horizons (hazy: 3e-4) or at
-twilight (9e-4); see ``results/groundtruth_speed.md`` for its speed and ``docs/design.md`` for
+one (tests/test_line_integral.py) on clear and hazy skies up to the horizon, with a low sun's
+finite disk and at twilight (sun zenith 92-100 deg, where the panels also split at the points whose
+rays to the sun graze the profiles' levels); see ``results/groundtruth_speed.md`` for its speed and ``docs/design.md`` for
 why it is built so.
 Scenes with objects use delta tracking.
 
@@ -336,8 +337,10 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         self.majorant_drop = min((float(c.profile.scale_height_m) for c in atmosphere.constituents
                                   if c.profile.kind == "exponential"), default=math.inf)
         if self.estimator == "line_integral":
+            levels = panel_levels(atmosphere)
             self.line = LineIntegral(self.optics, self.geometry, SunOpticalDepth(atmosphere, self.geometry),
-                                     panel_levels(atmosphere), polarized=self.polarized)
+                                     levels, polarized=self.polarized,
+                                     grazing_levels=levels if self.geometry.sun_can_graze(sun_zenith_deg) else ())
         #: Optional Mitsuba scene whose shapes stand in the atmosphere (terrain, buildings):
         #: Lambertian, grey albedo = the mean of their BSDF's diffuse reflectance. Objects are
         #: traced by the delta-tracking estimator (the line integral assumes open sky).
@@ -444,17 +447,26 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         image = self._estimate(seed, pixels.size, spp, batches, camera_rays, pixel_centres, progress)
         return self._tensor(image, batches, (height, width) if every_pixel else (pixels.size,))
 
-    def render_directions(self, directions, seed: int, spp: int, batches: int = 1) -> mi.TensorXf:
+    def render_directions(self, directions, seed: int, spp: int, batches: int = 1, orders: str = "all") -> mi.TensorXf:
         """Radiance seen from the observer along given unit directions (array (M, 3), east-north-
         up): a tensor (M, 4, N) like :meth:`render_orders` (or (batches, M, 4, N)), without a
-        sensor or pixel filter."""
+        sensor or pixel filter. ``orders="single"`` (line-integral estimator): the camera
+        segment's light alone, the solar disk and single scattering (orders 2 and 3+ are 0), with
+        ``spp`` points in the sun's disk."""
+        check_choice("orders", orders, ("all", "single"))
+        if orders == "single" and self.estimator != "line_integral":
+            raise ParameterError("orders", orders, "'all' with the delta_tracking estimator",
+                                 "single scattering alone is traced apart by the line_integral estimator only")
         directions = np.asarray(directions, dtype=np.float32).reshape(-1, 3)
         table = mi.Vector3f(*(mi.Float(directions[:, i]) for i in range(3)))
 
         def camera_rays(sampler, target):
             return mi.Point3f(0.0), dr.gather(mi.Vector3f, table, target), mi.Bool(True)
 
-        image = self._estimate(seed, directions.shape[0], spp, batches, camera_rays, True)
+        if orders == "single":
+            image = self._launches(seed, directions.shape[0], spp, batches, camera_rays, "single")
+        else:
+            image = self._estimate(seed, directions.shape[0], spp, batches, camera_rays, True)
         return self._tensor(image, batches, (directions.shape[0],))
 
     def _tensor(self, image, batches, shape):

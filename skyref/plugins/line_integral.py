@@ -42,7 +42,7 @@ import mitsuba as mi
 from skyref.plugins.drjit_namespace import xp
 from skyref.plugins.quadrature import NODES_PER_PANEL, GaussLegendreRule, insert_sorted, ordered_breakpoints
 
-__all__ = ["PANEL_THICKNESS", "OPTICAL_DEPTH_BREAKS", "grey_sum", "GreyProxy", "PanelMap", "SegmentQuadrature",
+__all__ = ["PANEL_THICKNESS", "OPTICAL_DEPTH_BREAKS", "QUADRATURE_DEPTH_BREAKS", "grey_sum", "GreyProxy", "PanelMap", "SegmentQuadrature",
            "LineIntegral"]
 
 #: Optical thickness (most transparent channel) above which a panel's nodes are spaced evenly
@@ -52,6 +52,10 @@ PANEL_THICKNESS = 0.05
 #: Optical depths (most transparent channel, at the start's extinction) at which a segment gets extra
 #: panel boundaries.
 OPTICAL_DEPTH_BREAKS = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0)
+
+#: ... and, where its sunlight is integrated by quadrature, these too (steps of 1.5x: with
+#: doublings, 3 nodes per panel were 8e-4 off at 680 nm on a hazy horizon, turbidity 6).
+QUADRATURE_DEPTH_BREAKS = (1.5, 3.0, 6.0, 12.0, 24.0)
 
 
 def grey_sum(grey, per_constituent):
@@ -125,14 +129,19 @@ class PanelMap:
 class LineIntegral:
     """Single scattering and forced collisions along segments (module docstring) for the
     ``optics`` of an atmosphere in ``geometry``, with the sun's optical depth ``sun_depth``
-    and the interior panel altitudes ``levels`` (m)."""
+    and the interior panel altitudes ``levels`` (m). ``grazing_levels`` (m): where rays to the
+    sun from the segments integrated by quadrature can pass below their start (a sun near or
+    below the horizon, :meth:`~skyref.plugins.geometry.SphericalShell.sun_can_graze`), the
+    tangent altitudes at which those segments' panels split (the profiles' levels; none
+    otherwise: the splits double the kernel, compiled only where needed)."""
 
     def __init__(self, optics, geometry, sun_depth, levels, nodes_per_panel: int = NODES_PER_PANEL,
-                 polarized: bool = False):
+                 polarized: bool = False, grazing_levels=()):
         self.optics = optics
         self.geometry = geometry
         self.sun_depth = sun_depth
         self.levels = tuple(float(x) for x in levels)
+        self.grazing_levels = tuple(float(x) for x in grazing_levels)
         self.rule = GaussLegendreRule(nodes_per_panel)
         #: Polarized: the scattered sunlight comes as its P11 and P12 parts (:meth:`_phase_elements`).
         self.polarized = bool(polarized)
@@ -151,16 +160,26 @@ class LineIntegral:
         optical depth in its most transparent channel at the extinction of its start (an
         optically thick segment, e.g. a horizontal ray through hazy air, loses most of its light
         within one level panel); and, where ``sunlight`` is computed, where the segment enters and
-        leaves the planet's shadow. Returns the panels and, unless ``sunlight`` is None, whether
-        each is lit (else None)."""
+        leaves the planet's shadow. Where it is integrated by quadrature, also at
+        QUADRATURE_DEPTH_BREAKS and where the ray to the sun starts or stops passing below a
+        grazing level: at twilight the sun's optical depth along the segment changes by tens within
+        a few km there, as smoothly between those points as the profiles between their levels
+        (without them, 9e-4 off at sun zenith 96 deg). Returns the panels and, unless
+        ``sunlight`` is None, whether each is lit (else None)."""
         crossings = [self.geometry.level_crossings(p, d, h, level) for level in self.levels]
         breakpoints = ordered_breakpoints(crossings, length, rising_only, xp)
         if sunlight is not None:
             t_in, t_out = self.geometry.shadow_interval(p, d, length, sun)
             breakpoints = insert_sorted(insert_sorted(breakpoints, t_in, xp), t_out, xp)
+        depth_breaks = OPTICAL_DEPTH_BREAKS
+        if sunlight == "quadrature":
+            depth_breaks = tuple(sorted(OPTICAL_DEPTH_BREAKS + QUADRATURE_DEPTH_BREAKS))
+            for level in self.grazing_levels:
+                for t in self.geometry.grazing_interval(p, d, length, sun, level):
+                    breakpoints = insert_sorted(breakpoints, t, xp)
         rho = [c.density(h) for c in self.optics.components]
         inv_extinction = dr.rcp(dr.maximum(dr.detach(dr.min(channels.optical_depth(rho), axis=0)), 1e-30))
-        for tau in OPTICAL_DEPTH_BREAKS:
+        for tau in depth_breaks:
             breakpoints = insert_sorted(breakpoints, dr.minimum(tau * inv_extinction, length), xp)
         panels = list(zip(breakpoints[:-1], breakpoints[1:]))
         if sunlight is None:
