@@ -14,9 +14,9 @@ Carlo, drawn from scrambled Sobol points (:mod:`skyref.plugins.sobol`), with a s
 the scattering directions where there is aerosol. For a fixed camera direction the camera
 segment's light is traced apart, once per few paths. Its quadrature is within 1e-4 of a refined
 one (tests/test_line_integral.py) on clear and hazy skies up to the horizon, with a low sun's
-finite disk and at twilight (sun zenith 92-100 deg, where the panels also split at the points whose
-rays to the sun graze the profiles' levels); see ``results/groundtruth_speed.md`` for its speed and ``docs/design.md`` for
-why it is built so.
+finite disk and at twilight (sun zenith 92-100 deg, where the panels also split at the points
+whose rays to the sun graze the profiles' levels); see ``results/groundtruth_speed.md`` for its
+speed and ``docs/design.md`` for why it is built so.
 Scenes with objects use delta tracking.
 
 **Polarization** (``polarized``, opt-in): both estimators then transport Stokes vectors. A path

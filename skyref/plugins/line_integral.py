@@ -42,8 +42,8 @@ import mitsuba as mi
 from skyref.plugins.drjit_namespace import xp
 from skyref.plugins.quadrature import NODES_PER_PANEL, GaussLegendreRule, insert_sorted, ordered_breakpoints
 
-__all__ = ["PANEL_THICKNESS", "OPTICAL_DEPTH_BREAKS", "QUADRATURE_DEPTH_BREAKS", "grey_sum", "GreyProxy", "PanelMap", "SegmentQuadrature",
-           "LineIntegral"]
+__all__ = ["PANEL_THICKNESS", "OPTICAL_DEPTH_BREAKS", "QUADRATURE_DEPTH_BREAKS", "grey_sum", "GreyProxy", "PanelMap",
+           "SegmentQuadrature", "LineIntegral"]
 
 #: Optical thickness (most transparent channel) above which a panel's nodes are spaced evenly
 #: in that channel's transmittance.
