@@ -189,14 +189,14 @@ class PlaneParallelSlab:
         t = (level - h) / dr.select(d.z == 0.0, 1e-30, d.z)
         return dr.select(d.z < 0.0, t, -dr.inf), dr.select(d.z > 0.0, t, dr.inf)
 
-    def shadow_interval(self, p, d, length, sun):
-        """A flat ground casts no shadow in the air (a sun below the horizon lights nothing:
-        its optical depth is infinite)."""
-        return mi.Float(length), mi.Float(length)
-
     def sun_can_graze(self, sun_zenith_deg: float) -> bool:
         """Rays to the sun never pass below the point they leave from."""
         return False
+
+    def shadow_interval(self, p, d, length, sun):
+        """A flat ground casts no shadow in the air (a sun below the horizon lights nothing:
+        its optical depth is infinite)."""
+        return self.grazing_interval(p, d, length, sun, 0.0)
 
     def grazing_interval(self, p, d, length, sun, tangent_altitude):
         """Rays to the sun never pass below the point they leave from: no interval."""
