@@ -354,7 +354,9 @@ def test_float16_tables_stay_close_to_float32(mi):
 
 def test_tables_round_trip_through_from_tables(mi):
     """tables() -> from_tables() -> the same tables and the same radiance, for separate and
-    combined single Mie; the arrays have Bruneton 2017's texture layout."""
+    combined single Mie; the arrays have Bruneton 2017's texture layout. The radiance agrees to
+    float32 rounding, not bit for bit: the copy's optical depths are -ln of the float32
+    transmittances, the original's are integrated (measured: at most 3e-8 relative)."""
     from skyref.lut.bruneton import Bruneton2017
 
     views = daylight_views()
@@ -371,13 +373,17 @@ def test_tables_round_trip_through_from_tables(mi):
         for key, value in copy.tables().items():
             assert np.array_equal(value, tables[key])
         for sun_zenith, observer_m in ((30.0, 0.0), (85.0, 2000.0), (60.0, 1.0e6)):
-            assert np.array_equal(lut_radiance(copy, sun_zenith, observer_m, views),
-                                  lut_radiance(lut, sun_zenith, observer_m, views))
+            a, b = lut_radiance(copy, sun_zenith, observer_m, views), lut_radiance(lut, sun_zenith, observer_m, views)
+            lit = b > 0.0
+            print(f"sun {sun_zenith}, {observer_m} m: largest relative difference "
+                  f"{np.abs(a[lit] / b[lit] - 1.0).max():.1e}")
+            assert np.allclose(a, b, rtol=1e-6, atol=0.0)
 
 
 def test_combined_mie_extrapolation(mi):
     """With ``combined_mie`` only channel 0's single Mie is stored (in the alpha channel): channel 0
-    equals the separate-Mie radiance exactly; the other channels carry the paper's extrapolation
+    equals the separate-Mie radiance to double-precision rounding (the two kernels order some
+    sums differently: 1e-16 measured); the other channels carry the paper's extrapolation
     error, largest in the aureole and at the horizon under the sun (measured from the ground
     <= 2.8% for the sun at 30 deg, 14% at 80 deg; from space <= 0.03% and 0.3%)."""
     views = daylight_views()
@@ -388,7 +394,7 @@ def test_combined_mie_extrapolation(mi):
     for sun_zenith, observer_m, bound in ((30.0, 0.0, 0.03), (80.0, 0.0, 0.15), (80.0, 1.0e6, 0.005)):
         a = lut_radiance(separate, sun_zenith, observer_m, views)
         b = lut_radiance(combined, sun_zenith, observer_m, views)
-        assert np.array_equal(a[:, 0], b[:, 0])
+        assert np.allclose(a[:, 0], b[:, 0], rtol=1e-12, atol=0.0)
         lit = a > 1e-3 * a.max()
         assert np.abs(b[lit] / a[lit] - 1.0).max() < bound
     # Combining the separate tables afterwards gives the combined precomputation; not the reverse.

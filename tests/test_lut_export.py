@@ -141,23 +141,29 @@ class Planet:
 
 
 class Transmittance:
-    """T to the top from the transmittance texture, and between two points of a ray."""
+    """T to the top from the transmittance texture, and between two points of a ray from the
+    optical depth tau = -ln T, converted from the texture once at load (as the export's
+    documentation advises: a ratio of transmittances underflows on grazing hazy rays)."""
 
     def __init__(self, planet, texture):
         self.planet, self.texture = planet, texture
+        self.optical_depth = -np.log(np.maximum(texture, np.finfo(np.float32).tiny))
 
     def to_top(self, r, mu):
-        height, width = self.texture.shape[:2]
-        return sample(self.texture, *self.planet.transmittance_uv(r, mu, width, height))
+        return self._sample(self.texture, r, mu)
+
+    def _sample(self, texture, r, mu):
+        height, width = texture.shape[:2]
+        return sample(texture, *self.planet.transmittance_uv(r, mu, width, height))
 
     def between(self, r, mu, d, hits):
-        """T(r, mu) / T(end) for rays above the ground; for rays to the ground the reversed ray's."""
+        """exp(-(tau(r, mu) - tau(end))) for rays above the ground; for rays to the ground the
+        reversed ray's."""
         r_d, mu_d = self.planet.along(r, mu, d)
         r_d = np.clip(r_d, self.planet.R, self.planet.Rt)
         sign = np.where(hits, -1.0, 1.0)
-        start, end = self.to_top(r, sign * mu), self.to_top(r_d, sign * mu_d)
-        ratio = np.where(hits[:, None], end / np.maximum(start, 1e-30), start / np.maximum(end, 1e-30))
-        return np.minimum(ratio, 1.0)
+        start, end = self._sample(self.optical_depth, r, sign * mu), self._sample(self.optical_depth, r_d, sign * mu_d)
+        return np.exp(-np.maximum(np.where(hits[:, None], end - start, start - end), 0.0))
 
 
 # --- Bruneton 2017 as an engine reads it -------------------------------------------------------------

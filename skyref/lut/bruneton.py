@@ -733,6 +733,7 @@ class Bruneton2017(LutMethod):
                                         precision=precision or self.precision,
                                         sun_angular_radius_deg=float(np.degrees(self.sun_angular_radius)),
                                         max_sun_zenith_deg=self.max_sun_zenith_deg, **tables)
+        method.transmittance = self.transmittance   # float32 at any precision: keeps its optical depths
         method.scattering_orders = self.scattering_orders
         method.precompute_seconds = self.precompute_seconds
         return method

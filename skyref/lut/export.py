@@ -39,7 +39,11 @@ OpenGL. Coordinates map a unit-range x to texel centres, u = 0.5 / n + x (1 - 1 
 tables are read with linear filtering and clamp-to-edge. Pixels are HALF where the method
 stores the table in float16 and FLOAT otherwise (Bruneton 2017 keeps transmittance and
 irradiance in float32 whatever the precision, as its reference implementation does), so the
-files hold exactly the values the method interpolates. Lengths in metres.
+files hold exactly the values the method interpolates. Lengths in metres. The transmittance
+between two points of a ray is exp(-(tau_a - tau_b)) with tau = -ln T the optical depth to the
+top: convert the transmittance texture to a float32 optical-depth texture once at load and
+interpolate that, as skyref does (:class:`~skyref.lut.transmittance.TransmittanceTable`); the
+paper's ratio of two transmittances fails on grazing hazy rays, where T underflows.
 
 The directory appears at once when it does not exist yet (the files are written into a
 temporary directory beside it, then moved); into an existing directory every file is moved
