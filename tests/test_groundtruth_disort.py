@@ -2,13 +2,20 @@
 plane-parallel solver (nanodisort, 64 streams, Nakajima–Tanaka intensity correction; see
 tests/references/disort.py, validated by tests/test_disort_reference.py).
 
-Cases, all at 550 nm (monochromatic), sun zenith 30 and 70 deg:
+Cases at 550 nm (monochromatic), sun zenith 30 and 70 deg:
 
 - ``rayleigh_0.1``: Rayleigh only, vertical optical depth exactly 0.1, black ground;
 - ``rayleigh_0.5``: Rayleigh only, vertical optical depth exactly 0.5, black ground;
 - ``rayleigh_aerosol``: Rayleigh (bruneton2017 values, tau 0.108) + aerosol (Cornette–Shanks
   g 0.8, Angstrom alpha 0, beta 0.25, i.e. optical depth 0.25, single-scattering albedo 0.9,
   scale height 1.2 km), Lambertian ground of albedo 0.1.
+
+and, under ``slow`` only, a layered atmosphere at 440, 550 and 680 nm and sun zenith 30, 60 and
+80 deg (``layered``): bruneton2017's Rayleigh, its Cornette–Shanks aerosol (g 0.8, scale height
+1.2 km) at turbidity 3 (optical depth 0.22 at 550 nm), its 300 DU ozone layer (absorbing only,
+a piecewise-linear profile 10-40 km), ground albedo 0.3; the sun a 0.05 deg disk (DISORT's sun
+is a point: the standard 0.27 deg disk would change the radiance by ~1e-4 at sun zenith 80).
+The line-integral estimator must agree with DISORT to 0.1% there (see ``TARGET_LAYERED``).
 
 Views: from the ground, looking up at zenith angles 0–85 deg and relative azimuths 0, 90 (-90 at
 sun zenith 70) and 180 deg; with aerosol also four views 10–20 deg from the sun (the aureole) and
@@ -43,6 +50,8 @@ directions, DISORT ~20 s of the time:
   (59 M in all); relative standard errors 0.14–0.23% (median 0.19%); |z| <= 3.25, rms z 1.06,
   mean z -0.06. Scaling DISORT by 1 +- 1% fails 125–126 of the 144 directions and all 12 scenes;
   by 1 +- 0.5%, all 12 scenes.
+
+Layered, 0.1% (``slow``): see ``test_line_integral_matches_layered_disort_to_a_tenth_percent``.
 """
 
 from __future__ import annotations
@@ -61,7 +70,7 @@ pytest.importorskip("nanodisort")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # `tests.references` under plain pytest
 
 from skyref.atmosphere import (Aerosol, Atmosphere, CornetteShanks, Rayleigh,  # noqa: E402
-                               solar_irradiance)
+                               from_turbidity, solar_irradiance)
 from tests.references.disort import disort_radiance  # noqa: E402
 
 WAVELENGTH_NM = 550.0
@@ -91,11 +100,21 @@ TOPUP_AT = 0.85
 TARGET_CI = 0.005
 TARGET_SLOW = 0.0025
 
+#: The layered scenes' target relative standard error per direction, and the agreement they must
+#: show: the noise-corrected RMS of the relative differences over a scene's directions at most
+#: AGREEMENT_LAYERED. A common bias of 0.1% would also put the scene's mean z near 2.5, above the
+#: limit 4 / sqrt(directions) (0.85-1.63 for 22-6 directions).
+TARGET_LAYERED = 0.0005
+AGREEMENT_LAYERED = 0.001
+LAYERED_WAVELENGTHS_NM = (440.0, 550.0, 680.0)
+LAYERED_SUN_ZENITHS = (30.0, 60.0, 80.0)
+LAYERED_SUN_RADIUS_DEG = 0.05
+
 #: Most wavefront lanes per render call (memory).
 MAX_LANES = 1 << 21
 
-SUN_AZIMUTH_DEG = {30.0: 135.0, 70.0: 250.0}
-SUN_ZENITHS = tuple(SUN_AZIMUTH_DEG)
+SUN_AZIMUTH_DEG = {30.0: 135.0, 70.0: 250.0, 60.0: 40.0, 80.0: 300.0}
+SUN_ZENITHS = (30.0, 70.0)
 CASES = ("rayleigh_0.1", "rayleigh_0.5", "rayleigh_aerosol")
 OBSERVERS = ("ground", "top")
 
@@ -122,6 +141,8 @@ def atmosphere(case: str) -> Atmosphere:
         aerosol = Aerosol(angstrom_alpha=0.0, angstrom_beta=0.25, single_scattering_albedo=0.9,
                           phase=CornetteShanks(0.8))
         return Atmosphere(constituents=(Rayleigh(), aerosol), ground_albedo=0.1)
+    if case == "layered":
+        return from_turbidity(3.0).replace(ground_albedo=0.3)
     raise KeyError(case)
 
 
@@ -139,9 +160,9 @@ def views(case: str, sza: float, observer: str):
         pairs = [(vz, az) for vz in DOWN_ZENITHS for az in (0.0, side, 180.0)]
     else:
         pairs = [(0.0, 0.0)] + [(vz, az) for vz in UP_ZENITHS for az in (0.0, side, 180.0)]
-        if case == "rayleigh_aerosol":
-            pairs += [(sza - 10.0, 0.0), (sza + 10.0, 0.0), (sza - 20.0, 0.0),
-                      (sza, _azimuth_for_scattering_angle(sza, 15.0))]
+        if case in ("rayleigh_aerosol", "layered"):
+            pairs += [(vz, 0.0) for vz in (sza - 10.0, sza + 10.0, sza - 20.0) if vz < 88.0]
+            pairs += [(sza, _azimuth_for_scattering_angle(sza, 15.0))]
             pairs += [(vz, 0.0) for vz in DOWN_ZENITHS]
     vza, raz = np.array(pairs, dtype=np.float64).T
     return vza, raz
@@ -151,18 +172,18 @@ def observer_altitude(case: str, observer: str) -> float:
     return 0.0 if observer == "ground" else atmosphere(case).thickness_m
 
 
-def solar_irradiance_550() -> float:
-    return float(np.asarray(solar_irradiance([WAVELENGTH_NM]))[0])
+def solar_irradiance_at(wavelength_nm: float) -> float:
+    return float(np.asarray(solar_irradiance([wavelength_nm]))[0])
 
 
 # --- DISORT (cached: ~0.4 s per Rayleigh run, ~4 s with aerosol) ---------------------------------
 
 @functools.lru_cache(maxsize=None)
-def reference(case: str, sza: float, observer: str) -> np.ndarray:
+def reference(case: str, sza: float, observer: str, wavelength_nm: float = WAVELENGTH_NM) -> np.ndarray:
     vza, raz = views(case, sza, observer)
-    return disort_radiance(atmosphere(case), WAVELENGTH_NM, sza, vza, raz,
+    return disort_radiance(atmosphere(case), wavelength_nm, sza, vza, raz,
                            observer_altitude_m=observer_altitude(case, observer),
-                           solar_irradiance=solar_irradiance_550(), n_streams=64)
+                           solar_irradiance=solar_irradiance_at(wavelength_nm), n_streams=64)
 
 
 # --- the path tracer -----------------------------------------------------------------------------
@@ -191,7 +212,8 @@ def _batch_means(integrator, directions, repeats, seed_base) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=None)
-def path_traced(case: str, sza: float, observer: str, target: float, estimator: str = "delta_tracking") -> dict:
+def path_traced(case: str, sza: float, observer: str, target: float, estimator: str = "delta_tracking",
+                wavelength_nm: float = WAVELENGTH_NM) -> dict:
     """Mean, standard error (from BATCHES seeds), samples per direction and timing.
 
     Allocation: a pilot (its own seed, discarded) estimates each direction's per-path variance
@@ -205,8 +227,9 @@ def path_traced(case: str, sza: float, observer: str, target: float, estimator: 
     from skyref.scene import Observer, Scene, Sun, direction_from_angles
 
     saz = SUN_AZIMUTH_DEG[sza]
-    scene = Scene(atmosphere=atmosphere(case), sun=Sun(sza, saz),
-                  observer=Observer(observer_altitude(case, observer)), wavelengths=[WAVELENGTH_NM])
+    sun = Sun(sza, saz, angular_radius_deg=LAYERED_SUN_RADIUS_DEG) if case == "layered" else Sun(sza, saz)
+    scene = Scene(atmosphere=atmosphere(case), sun=sun,
+                  observer=Observer(observer_altitude(case, observer)), wavelengths=[wavelength_nm])
     integrator = build_integrator(scene, geometry="plane_parallel", estimator=estimator)
     vza, raz = views(case, sza, observer)
     directions = direction_from_angles(vza, raz + saz)
@@ -238,20 +261,26 @@ def path_traced(case: str, sza: float, observer: str, target: float, estimator: 
 
 # --- the tests -----------------------------------------------------------------------------------
 
-def _check(case, sza, observer, target, estimator="delta_tracking"):
-    ref = reference(case, sza, observer)
-    pt = path_traced(case, sza, observer, target, estimator)
+def _check(case, sza, observer, target, estimator="delta_tracking", wavelength_nm=WAVELENGTH_NM):
+    ref = reference(case, sza, observer, wavelength_nm)
+    pt = path_traced(case, sza, observer, target, estimator, wavelength_nm)
     vza, raz = views(case, sza, observer)
     z = (pt["mean"] - ref) / pt["se"]
     rel_se = pt["se"] / ref
     table = "\n".join(f"  vza {v:6.1f} raz {a:7.2f}: disort {r:.6e} pt {p:.6e} rel {p / r - 1:+.5f} "
                       f"se {s:.5f} z {zz:+.2f}"
                       for v, a, r, p, s, zz in zip(vza, raz, ref, pt["mean"], rel_se, z))
-    message = f"{estimator}: {case} sza {sza} {observer} ({pt['seconds']:.1f} s):\n{table}"
+    rel = pt["mean"] / ref - 1.0
+    rms = math.sqrt(max(np.mean(rel ** 2 - rel_se ** 2), 0.0))
+    message = (f"{estimator}: {case} {wavelength_nm:g} nm sza {sza} {observer} ({pt['seconds']:.1f} s, "
+               f"{pt['samples'].sum():,} paths; mean z {z.mean():+.2f}, noise-corrected RMS difference "
+               f"{100 * rms:.3f}%):\n{table}")
+    print(message)
     assert np.all(ref > 0.0), message
     assert np.all(rel_se < target), "standard error above target\n" + message
     assert np.all(np.abs(z) < 4.0), "path tracer and DISORT disagree\n" + message
     assert abs(z.mean()) < 4.0 / math.sqrt(z.size), "common bias\n" + message
+    return rms
 
 
 SCENES = [(c, s, o) for c in CASES for s in SUN_ZENITHS for o in OBSERVERS]
@@ -284,3 +313,16 @@ def test_line_integral_matches_disort(case, sza, observer):
 @pytest.mark.parametrize("case,sza,observer", SCENES)
 def test_line_integral_matches_disort_to_a_quarter_percent(case, sza, observer):
     _check(case, sza, observer, TARGET_SLOW, "line_integral")
+
+
+LAYERED_SCENES = [(wl, sza, o) for wl in LAYERED_WAVELENGTHS_NM for sza in LAYERED_SUN_ZENITHS for o in OBSERVERS]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("wavelength_nm,sza,observer", LAYERED_SCENES)
+def test_line_integral_matches_layered_disort_to_a_tenth_percent(wavelength_nm, sza, observer):
+    """The line integral on the layered Rayleigh + aerosol + ozone atmosphere (module docstring)
+    at 0.05% per direction: every direction within 4 standard errors, the scene's mean z within
+    4 / sqrt(directions), and the noise-corrected RMS relative difference <= 0.1%."""
+    rms = _check("layered", sza, observer, TARGET_LAYERED, "line_integral", wavelength_nm)
+    assert rms <= AGREEMENT_LAYERED, f"RMS relative difference {100 * rms:.3f}% above 0.1%"
