@@ -12,7 +12,8 @@ Per sky the methods are compared with :func:`skyref.audit.audit.compare`: lumina
 beside the ground truth's own noise; statistics whose noise exceeds 1/5 of them are marked *.
 
 Usage: ``python benchmarks/lut_audit.py`` (everything; hours on 2 cores, Bruneton's precompute
-dominates). Parts can run separately: ``--part grid|sweeps`` and ``--methods NAME ...``; each
+dominates). Parts can run separately: ``--part grid|sweeps`` and ``--methods NAME ...`` (the
+sweeps render only their own 12 skies of the grid, minutes with the batch's 1024 spp); each
 part's numbers are kept in results/lut_audit/<part>_<method>.json and the report is rebuilt from
 every JSON present, so a long audit can be completed in pieces. Writes results/lut_audit.md,
 results/lut_audit.csv and results/lut_audit/*.png.
@@ -42,8 +43,18 @@ ROOT = os.path.normpath(os.path.join(os.path.dirname(os.path.abspath(__file__)),
 GRID = os.path.join(ROOT, "grids", "lut_audit.toml")
 RESULTS = os.path.join(ROOT, "results")
 
+#: Bruneton 2017 on hazy skies, two mechanisms (issue 15): (A) 50 uniform steps along 300-900 km
+#: horizon rays against a 1.2 km aerosol scale height; (B) 32 mu_s cells against the aerosol's
+#: forward peak in the scattering density. The sweep entries that remove each, at the paper's sizes:
+MECHANISM_A = "500 samples along rays (hazy)"
+MECHANISM_B = "mu_s 128 (hazy)"
+MECHANISMS_AB = "mu_s 128, 500 samples along rays (hazy)"
+
+#: Regions whose errors the sweeps report (skyref.audit.regions), with their column titles.
+SWEEP_REGIONS = (("sky", "sky"), ("horizon", "horizon"), ("sun", "sun"), ("antisolar", "anti-solar"))
+
 #: The sweeps: per method, (label, options[, atmosphere]) entries; the papers' defaults are {}
-#: (their numbers are taken from the grid part when it has run); the atmosphere is an index on the
+#: (evaluated again on the sweep skies); the atmosphere is an index on the
 #: grid's atmosphere axis (default 0, clear; 1: turbidity 6, where Bruneton's 50 samples along
 #: rays under-resolve the dense haze near the ground). Bruneton's storage variants need no precomputation
 #: of their own: "float16" and "combined Mie" are the paper-default tables re-read through
@@ -57,7 +68,10 @@ SWEEPS = {
                      ("paper (hazy)", {}, 1),
                      ("table x0.5 (hazy)", {"r_size": 16, "mu_size": 64, "mu_s_size": 16, "nu_size": 4}, 1),
                      ("table x0.5, 500 samples along rays (hazy)", {"r_size": 16, "mu_size": 64, "mu_s_size": 16,
-                                                                    "nu_size": 4, "integration_samples": 500}, 1)],
+                                                                    "nu_size": 4, "integration_samples": 500}, 1),
+                     (MECHANISM_A, {"integration_samples": 500}, 1),
+                     (MECHANISM_B, {"mu_s_size": 128}, 1),
+                     (MECHANISMS_AB, {"mu_s_size": 128, "integration_samples": 500}, 1)],
     "elek2009": [("paper (32x128x32, 4 orders)", {}),
                  ("table x0.5", {"scattering_size": (16, 64, 16)}),
                  ("table x2", {"scattering_size": (64, 256, 64)}),
@@ -208,55 +222,101 @@ def plot_grid(grid, rows_by_method, path):
     plt.close(fig)
 
 
+def sweep_skies(grid, directory, atmosphere: int):
+    """(index, coordinates, path) of the sweep skies (SWEEP_SKIES) of the grid's ``atmosphere``."""
+    return [s for s in truth_skies(grid, directory)
+            if s[1]["atmosphere"] == grid.axes["atmosphere"][atmosphere]
+            and s[1]["observer.altitude_m"] in SWEEP_SKIES["observer.altitude_m"]
+            and s[1]["sun.zenith_deg"] in SWEEP_SKIES["sun.zenith_deg"]]
+
+
 def sweep(grid, directory, name, log):
     """The sweep points of method ``name`` (see SWEEPS) on the sweep skies of each entry's
-    atmosphere."""
-    grid_rows = {r["index"]: r for r in _load("grid").get(name, [])}
+    atmosphere: its cost, and the median over the skies of each SWEEP_REGIONS region's
+    luminance RMS error (``<region>_rms``), the sky's p95 and CIEDE2000 p95."""
     default = {}   # the paper-default method, built once for the derived variants
     points = []
     for label, options, *rest in SWEEPS[name]:
-        atmosphere = rest[0] if rest else SWEEP_SKIES["atmosphere"]
-        skies = [s for s in truth_skies(grid, directory)
-                 if s[1]["atmosphere"] == grid.axes["atmosphere"][atmosphere]
-                 and s[1]["observer.altitude_m"] in SWEEP_SKIES["observer.altitude_m"]
-                 and s[1]["sun.zenith_deg"] in SWEEP_SKIES["sun.zenith_deg"]]
+        skies = sweep_skies(grid, directory, rest[0] if rest else SWEEP_SKIES["atmosphere"])
         derive = DERIVED.get((name, label))
-        if not options and all(index in grid_rows for index, _, _ in skies):
-            log(f"  {name} {label}: from the grid part")
-            rows = [grid_rows[index] for index, _, _ in skies]
-        elif derive is not None:
+        if derive is not None:
             rows = evaluate(name, {}, skies, log, derive=derive, built=default)
         else:
             rows = evaluate(name, options, skies, log, built=default if not options else None)
-        points.append({"method": name, "label": label, "options": options, "atmosphere": atmosphere,
+        points.append({"method": name, "label": label, "options": options, "atmosphere": rest[0] if rest else 0,
+                       "measured": datetime.date.today().isoformat(),
                        "precompute_s": rows[0]["precompute_s"],
                        "lookup_ns": float(np.median([r["lookup_ns"] for r in rows])),
-                       "sky_rms": _median(rows, "sky", "luminance", "rms"),
+                       **{f"{region}_rms": _median(rows, region, "luminance", "rms") for region, _ in SWEEP_REGIONS},
                        "sky_p95": _median(rows, "sky", "luminance", "p95"),
                        "delta_e_p95": _median(rows, "sky", "delta_e", "p95")})
     return points
 
 
+def mechanism_lines(points) -> list:
+    """Which of Bruneton's two hazy-sky mechanisms limits which region: each region's error with
+    the paper's settings, with (A) removed, (B) removed and both, from the sweep points."""
+    by_label = {p["label"]: p for p in points if p["method"] == "bruneton2017"}
+    labels = ("paper (hazy)", MECHANISM_A, MECHANISM_B, MECHANISMS_AB)
+    if not all(label in by_label for label in labels):
+        return []
+    lines = ["**Bruneton 2017 on hazy skies: which mechanism limits which region.** (A): 50 uniform steps along "
+             "rays hundreds of km long against a 1.2 km aerosol scale height (removed: 500 steps); (B): 32 mu_s "
+             "cells against the aerosol's forward peak in the scattering density (removed: 128 cells). Median "
+             "luminance RMS error (%) of the hazy sweep skies:", "",
+             "| region | paper | (A) removed | (B) removed | both removed | limited by |", "|---|---:|---:|---:|---:|---|"]
+    for region, title in SWEEP_REGIONS:
+        paper, a, b, ab = (by_label[label][f"{region}_rms"] for label in labels)
+        gain_a, gain_b = paper - a, paper - b
+        if max(gain_a, gain_b) < 0.1 * paper:
+            verdict = "neither (less than 1/10 of its error)"
+        elif min(gain_a, gain_b) > 0.5 * max(gain_a, gain_b):
+            verdict = "both"
+        else:
+            verdict = "(A) steps along rays" if gain_a > gain_b else "(B) mu_s cells"
+        lines.append(f"| {title} | {100 * paper:.1f} | {100 * a:.1f} | {100 * b:.1f} | {100 * ab:.1f} | {verdict} |")
+    return lines + [""]
+
+
 def plot_pareto(points, path):
+    """Sky error against precompute and lookup time of every sweep point, one colour and marker
+    per method, each point labelled with its setting, no two labels overlapping
+    (:func:`skyref.audit.map_report.place_labels`)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), sharey=True, constrained_layout=True)
-    markers = dict(zip(SWEEPS, "osD"))
-    for ax, key, xlabel in ((axes[0], "precompute_s", "precompute time (s, 17 wavelengths)"),
-                            (axes[1], "lookup_ns", "lookup time (ns per direction, 17 wavelengths)")):
-        for p in points:
-            ax.scatter(p[key], 100 * p["sky_rms"], marker=markers[p["method"]], s=36,
-                       label=p["method"] if p is next(q for q in points if q["method"] == p["method"]) else None)
-            ax.annotate(p["label"], (p[key], 100 * p["sky_rms"]), fontsize=6, xytext=(3, 3), textcoords="offset points")
+    from skyref.audit.map_report import MARKER_SIZE_PT, place_labels
+
+    styles = {name: (marker, f"C{i}") for i, (name, marker) in enumerate(zip(SWEEPS, "osD"))}
+    errors = np.array([100 * p["sky_rms"] for p in points])
+    fig, axes = plt.subplots(1, 2, figsize=(14, 6.5), sharey=True, layout="constrained")
+    panels = ((axes[0], "precompute_s", "precompute time (s, 17 wavelengths)"),
+              (axes[1], "lookup_ns", "lookup time (ns per direction, 17 wavelengths)"))
+    for ax, key, xlabel in panels:
+        costs = np.array([p[key] for p in points])
+        for name, (marker, colour) in styles.items():
+            mine = [i for i, p in enumerate(points) if p["method"] == name]
+            if mine:
+                ax.scatter(costs[mine], errors[mine], marker=marker, color=colour, s=MARKER_SIZE_PT ** 2,
+                           label=name, zorder=3)
         ax.set_xscale("log")
         ax.set_yscale("log")
+        ax.set_xlim(costs.min() / 3.0, costs.max() * 3.0)    # room for the labels
+        ax.set_ylim(errors.min() / 1.6, errors.max() * 1.6)
         ax.set_xlabel(xlabel)
         ax.grid(alpha=0.3, which="both")
     axes[0].set_ylabel("sky luminance RMS error (%), median of 6 skies")
-    axes[0].legend()
+    axes[0].yaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda value, _: f"{value:g}"))
+    axes[0].yaxis.set_minor_formatter(matplotlib.ticker.FuncFormatter(lambda value, _: f"{value:g}"))
+    fig.legend(*axes[0].get_legend_handles_labels(), loc="outside upper center", ncols=len(styles), frameon=False)
+    fig.canvas.draw()                 # labels are placed on the final layout
+    fig.set_layout_engine("none")
+    renderer = fig.canvas.get_renderer()
+    for ax, key, _ in panels:
+        place_labels(ax, [(p[key], 100 * p["sky_rms"]) for p in points], [p["label"] for p in points], renderer)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=120, format="png")
     plt.close(fig)
@@ -289,9 +349,15 @@ def main():
     log = print
     os.makedirs(os.path.join(RESULTS, "lut_audit"), exist_ok=True)
     if args.part != "report":
-        manifest = run_batch(grid, log=log)
-        if manifest["skies_finished"] != len(grid):
-            sys.exit(f"ground truth incomplete: {manifest['skies_finished']}/{len(grid)} skies; rerun to resume")
+        # The sweeps need only their own skies of the grid; the grid part needs all of them.
+        needed = (range(len(grid)) if args.part != "sweeps" else
+                  sorted(index for atmosphere in (0, 1)
+                         for index, _, _ in sweep_skies(grid, grid.output.directory, atmosphere)))
+        run_batch(grid, log=log, indices=needed)
+        missing = [index for index, _, path in truth_skies(grid, grid.output.directory)
+                   if index in needed and not os.path.exists(path)]
+        if missing:
+            sys.exit(f"ground truth incomplete: {len(missing)} of {len(needed)} skies missing; rerun to resume")
     directory = grid.output.directory
     for name in args.methods:
         if args.part in ("all", "grid"):
@@ -327,13 +393,18 @@ def write_report(grid):
         lines += ["## Sweeps: speed against error", "",
                   "Bruneton 2017's atmosphere, clear unless marked (hazy): turbidity 6; observer 0 and 10 km, sun "
                   "zenith 30, 80 and 92 deg (6 skies); errors are medians over them (noise-corrected RMS of the "
-                  "sky's relative luminance error). Precompute times of storage variants (float16, combined Mie) "
-                  "are those of the float32 tables they re-store.", "",
-                  "| method | setting | precompute (s) | lookup (ns/dir) | sky RMS (%) | sky p95 (%) | CIEDE2000 p95 |",
-                  "|---|---|---:|---:|---:|---:|---:|"]
-        lines += [f"| {p['method']} | {p['label']} | {p['precompute_s']:.1f} | {p['lookup_ns']:.0f} | "
-                  f"{100 * p['sky_rms']:.2f} | {100 * p['sky_p95']:.2f} | {p['delta_e_p95']:.2f} |" for p in points]
-        lines += ["", "![Pareto](lut_audit/pareto.png)", ""]
+                  "relative luminance error per region, regions as above). Precompute times of storage variants "
+                  "(float16, combined Mie) are those of the float32 tables they re-store. Measured: the date of the "
+                  "run that produced the row (each method's sweeps run as one part; `–`: before the column existed).",
+                  "",
+                  "| method | setting | measured | precompute (s) | lookup (ns/dir) | "
+                  + " | ".join(f"{title} RMS (%)" for _, title in SWEEP_REGIONS) + " | sky p95 (%) | CIEDE2000 p95 |",
+                  "|---|---|---|---:|---:|" + "---:|" * (len(SWEEP_REGIONS) + 2)]
+        lines += [f"| {p['method']} | {p['label']} | {p.get('measured', '–')} | {p['precompute_s']:.1f} | "
+                  f"{p['lookup_ns']:.0f} | "
+                  + " | ".join(f"{100 * p.get(f'{region}_rms', float('nan')):.2f}" for region, _ in SWEEP_REGIONS)
+                  + f" | {100 * p['sky_p95']:.2f} | {p['delta_e_p95']:.2f} |" for p in points]
+        lines += ["", *mechanism_lines(points), "![Pareto](lut_audit/pareto.png)", ""]
     with atomic_write(os.path.join(RESULTS, "lut_audit.md")) as f:
         f.write("\n".join(lines))
     with atomic_write(os.path.join(RESULTS, "lut_audit.csv"), "w") as f:

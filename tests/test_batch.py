@@ -214,3 +214,25 @@ def test_runs_on_a_given_dask_scheduler(tmp_path):
         a = read_sky_exr(tmp_path / "external" / "skies" / f"sky-{i}.exr")
         b = read_sky_exr(tmp_path / "local" / "skies" / f"sky-{i}.exr")
         np.testing.assert_array_equal(a.radiance, b.radiance)
+
+
+def test_part_of_a_grid_renders_those_skies_as_the_whole_grid_would(tmp_path):
+    """run_batch(indices=...): only those skies, with the whole grid's ids and seeds (the same
+    EXRs as a run of the whole grid); a number outside the grid is refused naming ``indices``
+    before anything is written."""
+    from skyref.batch import run_batch
+    from skyref.io.exr import read_sky_exr
+
+    axes = '"sun.zenith_deg" = [20.0, 50.0, 80.0]'
+    output = 'width = 8\nheight = 4\nspp = 8\npasses = 2'
+    part = load_grid(write_grid(tmp_path / "a.toml", axes, 'directory = "part"\n' + output))
+    whole = load_grid(write_grid(tmp_path / "b.toml", axes, 'directory = "whole"\n' + output))
+    with pytest.raises(ParameterError, match="indices"):
+        run_batch(part, workers=1, progress=False, log=lambda *_: None, indices=[0, 3])
+    assert not (tmp_path / "part").exists()
+    manifest = run_batch(part, workers=1, progress=False, log=lambda *_: None, indices=[2])
+    assert manifest["skies_finished"] == 1 and [m["exr"] for m in manifest["skies"]] == ["skies/sky-2.exr"]
+    run_batch(whole, workers=1, progress=False, log=lambda *_: None)
+    a = read_sky_exr(tmp_path / "part" / "skies" / "sky-2.exr")
+    b = read_sky_exr(tmp_path / "whole" / "skies" / "sky-2.exr")
+    np.testing.assert_array_equal(a.radiance, b.radiance)

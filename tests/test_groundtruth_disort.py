@@ -51,7 +51,11 @@ directions, DISORT ~20 s of the time:
   mean z -0.06. Scaling DISORT by 1 +- 1% fails 125–126 of the 144 directions and all 12 scenes;
   by 1 +- 0.5%, all 12 scenes.
 
-Layered, 0.1% (``slow``): see ``test_line_integral_matches_layered_disort_to_a_tenth_percent``.
+Layered, 0.1% (``slow``, ``test_line_integral_matches_layered_disort_to_a_tenth_percent``), measured
+at commit c7aa684 (2 cores, shared with a batch render for half the run): 18 scenes in 57 min
+(56-466 s each; 736 M paths), 249 directions; relative standard errors 0.009-0.042% (median
+0.03%); |z| <= 3.63 (3 directions above 3), RMS z 1.05, mean z +0.17; relative differences
+RMS 0.032%, at most 0.14%; noise-corrected RMS per scene 0-0.039%.
 """
 
 from __future__ import annotations

@@ -28,7 +28,8 @@ from skyref.sky_method import describe_operations
 
 __all__ = ["ERROR_LINEAR", "LABEL_DIRECTIONS", "LABEL_RINGS_PT", "MARKER_SIZE_PT", "OTHER_REPORTS", "PARETO_DPI",
            "analytic_scale_table", "contact_entries", "contact_sheet_figure", "error_norm", "map_table",
-           "operations_table", "pareto_figure", "plot_contact_sheet", "plot_pareto", "sky_dome", "write_map_report"]
+           "operations_table", "pareto_figure", "place_labels", "plot_contact_sheet", "plot_pareto", "sky_dome",
+           "write_map_report"]
 
 #: Relative luminance error within which the contact sheet's symmetric-log colour scale is linear.
 ERROR_LINEAR = 0.01
@@ -106,7 +107,7 @@ def _distance(point, box) -> float:
     return float(np.hypot(max(box.x0 - point[0], 0.0, point[0] - box.x1), max(box.y0 - point[1], 0.0, point[1] - box.y1)))
 
 
-def _place_labels(ax, points, texts, renderer, fontsize: float = 7.0) -> list:
+def place_labels(ax, points, texts, renderer, fontsize: float = 7.0) -> list:
     """Annotate each data point of ``points`` with its text; returns the annotations.
 
     Placement in display space, greedy in the order given: of the offsets of
@@ -173,7 +174,7 @@ def _place_labels(ax, points, texts, renderer, fontsize: float = 7.0) -> list:
 def pareto_figure(summaries: list[dict]):
     """The Pareto plot of ``summaries`` (:func:`skyref.audit.speed_map.entry_summary`, or the
     ``entries`` of map.json): sky luminance RMS error against the cost of the first frame and of
-    each further frame, every measured entry labelled without overlaps (:func:`_place_labels`)."""
+    each further frame, every measured entry labelled without overlaps (:func:`place_labels`)."""
     # Lazy: selecting the Agg backend is a side effect, made only when plots are written.
     import matplotlib
 
@@ -209,7 +210,7 @@ def pareto_figure(summaries: list[dict]):
     renderer = fig.canvas.get_renderer()
     texts = [f"{s['method']} {s['label']}" for s in measured]
     for ax, cost, _ in panels:
-        _place_labels(ax, [(cost(s), 100 * s["sky_rms_median"]) for s in measured], texts, renderer)
+        place_labels(ax, [(cost(s), 100 * s["sky_rms_median"]) for s in measured], texts, renderer)
     return fig
 
 

@@ -23,6 +23,7 @@ from skyref.batch.store import NETCDF, BatchStore
 from skyref.batch.worker import render_and_store
 from skyref.errors import ParameterError
 from skyref.extras import require
+from skyref.validation import check_int
 
 __all__ = ["make_task", "SCHEDULER_TIMEOUT_S", "check_workers", "local_cluster", "connect", "run_batch"]
 
@@ -75,16 +76,23 @@ def connect(scheduler: str):
 
 
 def run_batch(grid: Grid, scheduler: str | None = None, workers: int | None = None, variant: str | None = None,
-              verify: bool = False, progress: bool = True, log=print, netcdf: bool = False) -> dict:
-    """Render every unfinished sky of ``grid``; returns the manifest (see
-    :class:`skyref.batch.store.BatchStore`) plus ``failed`` (sky id -> error message),
-    ``wall_time_s`` and ``netcdf``: with ``netcdf``, the dataset is copied to ``dataset.nc``
-    once every sky is finished, and this is its path (else None)."""
+              verify: bool = False, progress: bool = True, log=print, netcdf: bool = False,
+              indices=None) -> dict:
+    """Render every unfinished sky of ``grid`` (or of those among the sky numbers ``indices``,
+    e.g. the part of a grid a benchmark needs: the same skies, ids and seeds as in the whole
+    grid's run); returns the manifest (see :class:`skyref.batch.store.BatchStore`) plus
+    ``failed`` (sky id -> error message), ``wall_time_s`` and ``netcdf``: with ``netcdf``, the
+    dataset is copied to ``dataset.nc`` once every sky is finished, and this is its path (else
+    None)."""
     require("batch")
     from dask.distributed import Client  # lazy: dask's import cost
 
     # Everything is checked, and the scheduler reached, before anything is written.
     first_scene = grid.validate()
+    if indices is None:
+        indices = range(len(grid))
+    else:
+        indices = sorted({check_int("indices", i, 0, len(grid) - 1) for i in indices})
     if workers is not None and scheduler is not None:
         raise ParameterError("workers", workers, "only without --scheduler (the cluster sizes itself)", "conflict")
     if scheduler is None:
@@ -100,23 +108,24 @@ def run_batch(grid: Grid, scheduler: str | None = None, workers: int | None = No
     else:
         client, threads = connect(scheduler), None
     try:
-        return _run(grid, store, first_scene, client, threads, variant, verify, progress, log, netcdf)
+        return _run(grid, store, first_scene, client, threads, variant, verify, progress, log, netcdf, indices)
     finally:
         client.close()
         if cluster is not None:
             cluster.close()
 
 
-def _run(grid, store, first_scene, client, threads, variant, verify, progress, log, netcdf) -> dict:
+def _run(grid, store, first_scene, client, threads, variant, verify, progress, log, netcdf, indices) -> dict:
     """The body of :func:`run_batch`, once the cluster is up."""
     from dask.distributed import as_completed  # lazy: dask's import cost
 
     with store.lock():
         store.prepare(first_scene)
-        pending_indices = [i for i in range(len(grid)) if not store.is_finished(grid.sky_id(i), verify)]
+        pending_indices = [i for i in indices if not store.is_finished(grid.sky_id(i), verify)]
         pending = (grid.sky(i) for i in pending_indices)
-        done_before = len(grid) - len(pending_indices)
-        log(f"skyref batch: {len(grid)} skies on a {' x '.join(map(str, grid.shape))} grid, "
+        done_before = len(indices) - len(pending_indices)
+        part = "" if len(indices) == len(grid) else f"{len(indices)} of the "
+        log(f"skyref batch: {part}{len(grid)} skies on a {' x '.join(map(str, grid.shape))} grid, "
             f"{done_before} already finished, output {store.directory}")
         start = time.perf_counter()
         failed = {}
@@ -124,7 +133,7 @@ def _run(grid, store, first_scene, client, threads, variant, verify, progress, l
         if progress:
             from tqdm import tqdm  # lazy: tqdm's import cost, paid only with a progress bar
 
-            bar = tqdm(total=len(grid), initial=done_before, unit="sky", desc="skyref batch", smoothing=0.1)
+            bar = tqdm(total=len(indices), initial=done_before, unit="sky", desc="skyref batch", smoothing=0.1)
         try:
             window = 2 * max(1, len(client.scheduler_info(n_workers=-1)["workers"]))
             queue = as_completed()
