@@ -237,13 +237,14 @@ def sweep(grid, directory, name, log):
     default = {}   # the paper-default method, built once for the derived variants
     points = []
     for label, options, *rest in SWEEPS[name]:
-        skies = sweep_skies(grid, directory, rest[0] if rest else SWEEP_SKIES["atmosphere"])
+        atmosphere = rest[0] if rest else SWEEP_SKIES["atmosphere"]
+        skies = sweep_skies(grid, directory, atmosphere)
         derive = DERIVED.get((name, label))
         if derive is not None:
             rows = evaluate(name, {}, skies, log, derive=derive, built=default)
         else:
             rows = evaluate(name, options, skies, log, built=default if not options else None)
-        points.append({"method": name, "label": label, "options": options, "atmosphere": rest[0] if rest else 0,
+        points.append({"method": name, "label": label, "options": options, "atmosphere": atmosphere,
                        "measured": datetime.date.today().isoformat(),
                        "precompute_s": rows[0]["precompute_s"],
                        "lookup_ns": float(np.median([r["lookup_ns"] for r in rows])),
