@@ -148,8 +148,8 @@ def test_advice_costs_say_whose_they_are_and_what_they_count():
 
 def test_map_report_tables_show_operations_and_scale():
     """The README's tables: what each entry's costs count, and per analytic entry and map sky the
-    RMS as it is -> after the best scale factor (s), refused skies marked."""
-    from skyref.audit.map_report import analytic_scale_table, operations_table
+    RMS as it is -> after the best scale factor (s), refused skies marked, and the gap in plain words."""
+    from skyref.audit.map_report import analytic_gap_lines, analytic_scale_table, operations_table
     from skyref.audit.speed_map import MAP_SKIES
 
     first, second = MAP_SKIES[0].name, MAP_SKIES[1].name
@@ -168,6 +168,10 @@ def test_map_report_tables_show_operations_and_scale():
     cells = [c.strip() for c in lines[2].strip("|").split("|")]
     assert cells[:4] == ["m", "published", "65.0 → 10.0* (s = 0.606)", "refused"]
     assert cells[4:] == ["–"] * (len(MAP_SKIES) - 2)
+    assert MAP_SKIES[0].kind == "clear" and MAP_SKIES[1].kind == "clear"     # the second is refused
+    assert analytic_gap_lines(summaries) == [
+        "- **m published**: on the clear skies 1.65x too bright (median best scale 0.606); sky luminance RMS "
+        "error 65.0% as it is, 10.0% after that scale (the error of shape and colour)."]
 
 
 def test_advise_cli(tmp_path, capsys):

@@ -27,7 +27,7 @@ from skyref.projection import equirectangular_pixel, fisheye_direction
 from skyref.sky_method import describe_operations
 
 __all__ = ["ERROR_LINEAR", "LABEL_DIRECTIONS", "LABEL_RINGS_PT", "MARKER_SIZE_PT", "OTHER_REPORTS", "PARETO_DPI",
-           "analytic_scale_table", "contact_entries", "contact_sheet_figure", "error_norm", "map_table",
+           "analytic_gap_lines", "analytic_scale_table", "contact_entries", "contact_sheet_figure", "error_norm", "map_table",
            "operations_table", "pareto_figure", "place_labels", "plot_contact_sheet", "plot_pareto", "sky_dome",
            "write_map_report"]
 
@@ -99,6 +99,27 @@ def analytic_scale_table(summaries: list[dict]) -> list[str]:
                          f"{_percent(scale['rms'], scale['resolved_rms'])} → "
                          f"{_percent(scale['rms_scaled'], scale['resolved_rms_scaled'])} (s = {scale['factor']:.3g})")
         lines.append(f"| {s['method']} | {s['label']} | " + " | ".join(cells) + " |")
+    return lines
+
+
+def analytic_gap_lines(summaries: list[dict], kind: str = "clear") -> list[str]:
+    """Markdown bullets, one per analytic entry: the gap to the ground truth on the map skies of
+    ``kind`` that it does not refuse, in plain words: how much too bright (or dark) it is (1 / the
+    median best scale factor s) and its median sky luminance RMS error as it is and after s."""
+    lines = []
+    for s in summaries:
+        if s["family"] != "analytic" or "scale" not in s:
+            continue
+        scales = [s["scale"][sky.name] for sky in MAP_SKIES
+                  if sky.kind == kind and sky.name in s["scale"] and sky.name not in s["refused"]]
+        if not scales:
+            continue
+        factor = float(np.median([x["factor"] for x in scales]))
+        brightness = (f"{1.0 / factor:.2f}x too bright" if factor < 1.0 else f"{factor:.2f}x too dark")
+        lines.append(f"- **{s['method']} {s['label']}**: on the {kind} skies {brightness} (median best scale "
+                     f"{factor:.3g}); sky luminance RMS error {100 * np.median([x['rms'] for x in scales]):.1f}% "
+                     f"as it is, {100 * np.median([x['rms_scaled'] for x in scales]):.1f}% after that scale "
+                     "(the error of shape and colour).")
     return lines
 
 
@@ -412,6 +433,7 @@ def write_map_report(entries, skies, rows, summaries, cache_dir: str, results_di
         f"single scale factor s, and s: {SCALE_DEFINITION}. An error that s removes is one of overall "
         "brightness (the model's sun or calibration); what remains is one of shape and colour.", "",
         *analytic_scale_table(summaries), "",
+        "The gap in plain words (medians over the clear skies):", "", *analytic_gap_lines(summaries), "",
         "## Contact sheet", "",
         "The first sky of each kind by every method at its default setting, as the sky dome (upward fisheye: "
         "zenith in the centre, horizon on the circle, north up, east left; tone-mapped with the ground truth's "
