@@ -282,44 +282,18 @@ def mechanism_lines(points) -> list:
 def plot_pareto(points, path):
     """Sky error against precompute and lookup time of every sweep point, one colour and marker
     per method, each point labelled with its setting, no two labels overlapping
-    (:func:`skyref.audit.map_report.place_labels`)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
+    (:func:`skyref.audit.map_report.labelled_pareto_figure`)."""
     import matplotlib.pyplot as plt
-    import matplotlib.ticker
 
-    from skyref.audit.map_report import MARKER_SIZE_PT, place_labels
+    from skyref.audit.map_report import labelled_pareto_figure
 
-    styles = {name: (marker, f"C{i}") for i, (name, marker) in enumerate(zip(SWEEPS, "osD"))}
-    errors = np.array([100 * p["sky_rms"] for p in points])
-    fig, axes = plt.subplots(1, 2, figsize=(14, 6.5), sharey=True, layout="constrained")
-    panels = ((axes[0], "precompute_s", "precompute time (s, 17 wavelengths)"),
-              (axes[1], "lookup_ns", "lookup time (ns per direction, 17 wavelengths)"))
-    for ax, key, xlabel in panels:
-        costs = np.array([p[key] for p in points])
-        for name, (marker, colour) in styles.items():
-            mine = [i for i, p in enumerate(points) if p["method"] == name]
-            if mine:
-                ax.scatter(costs[mine], errors[mine], marker=marker, color=colour, s=MARKER_SIZE_PT ** 2,
-                           label=name, zorder=3)
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlim(costs.min() / 3.0, costs.max() * 3.0)    # room for the labels
-        ax.set_ylim(errors.min() / 1.6, errors.max() * 1.6)
-        ax.set_xlabel(xlabel)
-        ax.grid(alpha=0.3, which="both")
-    axes[0].set_ylabel("sky luminance RMS error (%), median of 6 skies")
-    axes[0].yaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda value, _: f"{value:g}"))
-    axes[0].yaxis.set_minor_formatter(matplotlib.ticker.FuncFormatter(lambda value, _: f"{value:g}"))
-    fig.legend(*axes[0].get_legend_handles_labels(), loc="outside upper center", ncols=len(styles), frameon=False)
-    fig.canvas.draw()                 # labels are placed on the final layout
-    fig.set_layout_engine("none")
-    renderer = fig.canvas.get_renderer()
-    for ax, key, _ in panels:
-        place_labels(ax, [(p[key], 100 * p["sky_rms"]) for p in points], [p["label"] for p in points], renderer)
+    panels = (("precompute time (s, 17 wavelengths)", [p["precompute_s"] for p in points]),
+              ("lookup time (ns per direction, 17 wavelengths)", [p["lookup_ns"] for p in points]))
+    fig = labelled_pareto_figure(panels, [100 * p["sky_rms"] for p in points], [p["method"] for p in points],
+                                 {name: (marker, f"C{i}") for i, (name, marker) in enumerate(zip(SWEEPS, "osD"))},
+                                 [p["label"] for p in points], "sky luminance RMS error (%), median of 6 skies")
     with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=120, format="png")
+        fig.savefig(tmp, dpi="figure", format="png")
     plt.close(fig)
 
 

@@ -27,9 +27,9 @@ from skyref.projection import equirectangular_pixel, fisheye_direction
 from skyref.sky_method import describe_operations
 
 __all__ = ["ERROR_LINEAR", "LABEL_DIRECTIONS", "LABEL_RINGS_PT", "MARKER_SIZE_PT", "OTHER_REPORTS", "PARETO_DPI",
-           "analytic_gap_lines", "analytic_scale_table", "contact_entries", "contact_sheet_figure", "error_norm", "map_table",
-           "operations_table", "pareto_figure", "place_labels", "plot_contact_sheet", "plot_pareto", "sky_dome",
-           "write_map_report"]
+           "analytic_gap_lines", "analytic_scale_table", "contact_entries", "contact_sheet_figure", "error_norm",
+           "labelled_pareto_figure", "map_table", "operations_table", "pareto_figure", "place_labels",
+           "plot_contact_sheet", "plot_pareto", "sky_dome", "write_map_report"]
 
 #: Relative luminance error within which the contact sheet's symmetric-log colour scale is linear.
 ERROR_LINEAR = 0.01
@@ -192,30 +192,26 @@ def place_labels(ax, points, texts, renderer, fontsize: float = 7.0) -> list:
     return annotations
 
 
-def pareto_figure(summaries: list[dict]):
-    """The Pareto plot of ``summaries`` (:func:`skyref.audit.speed_map.entry_summary`, or the
-    ``entries`` of map.json): sky luminance RMS error against the cost of the first frame and of
-    each further frame, every measured entry labelled without overlaps (:func:`place_labels`)."""
+def labelled_pareto_figure(panels, errors, groups, styles: dict, texts, ylabel: str):
+    """Two log-log panels of ``errors`` (%, one per point) against each panel's costs
+    (``panels``: (x label, costs) pairs), one marker and colour per group (``styles``: group ->
+    (marker, colour); ``groups``: each point's group, shown in a legend above), every point
+    labelled with its text without overlaps (:func:`place_labels`)."""
     # Lazy: selecting the Agg backend is a side effect, made only when plots are written.
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    families = {"path tracer": ("o", "C0"), "LUT": ("s", "C1"), "analytic": ("D", "C2")}
-    measured = [s for s in summaries if "frame_s" in s]
+    errors = np.asarray(errors, dtype=np.float64)
     fig, axes = plt.subplots(1, 2, figsize=(14, 6.5), dpi=PARETO_DPI, sharey=True, layout="constrained")
-    panels = ((axes[0], lambda s: s["frame_s"], f"one frame of {FRAME_DIRECTIONS:,} directions from scratch (s)"),
-              (axes[1], lambda s: s["per_view_s"] + FRAME_DIRECTIONS * s["lookup_s"],
-               "each further frame, tables kept (s)"))
-    errors = np.array([100 * s["sky_rms_median"] for s in measured])
-    for ax, cost, xlabel in panels:
-        costs = np.array([cost(s) for s in measured])
-        for family, (marker, colour) in families.items():
-            mine = [i for i, s in enumerate(measured) if s["family"] == family]
+    for ax, (xlabel, costs) in zip(axes, panels):
+        costs = np.asarray(costs, dtype=np.float64)
+        for group, (marker, colour) in styles.items():
+            mine = [i for i, g in enumerate(groups) if g == group]
             if mine:
                 ax.scatter(costs[mine], errors[mine], marker=marker, color=colour, s=MARKER_SIZE_PT ** 2,
-                           label=family, zorder=3)
+                           label=group, zorder=3)
         ax.set_xscale("log")
         ax.set_yscale("log")
         # Room for the labels: the data span a middle part of each logarithmic axis.
@@ -223,16 +219,31 @@ def pareto_figure(summaries: list[dict]):
         ax.set_ylim(errors.min() / 1.6, errors.max() * 1.6)
         ax.set_xlabel(xlabel)
         ax.grid(alpha=0.3, which="both")
-    axes[0].set_ylabel("sky luminance RMS error (%), median of the map's skies")
-    fig.legend(*axes[0].get_legend_handles_labels(), loc="outside upper center", ncols=len(families), frameon=False)
+    axes[0].set_ylabel(ylabel)
+    fig.legend(*axes[0].get_legend_handles_labels(), loc="outside upper center", ncols=len(styles), frameon=False)
     # Labels are placed on the final layout: lay the figure out once, then keep it.
     fig.canvas.draw()
     fig.set_layout_engine("none")
     renderer = fig.canvas.get_renderer()
-    texts = [f"{s['method']} {s['label']}" for s in measured]
-    for ax, cost, _ in panels:
-        place_labels(ax, [(cost(s), 100 * s["sky_rms_median"]) for s in measured], texts, renderer)
+    for ax, (_, costs) in zip(axes, panels):
+        place_labels(ax, list(zip(costs, errors)), texts, renderer)
     return fig
+
+
+def pareto_figure(summaries: list[dict]):
+    """The Pareto plot of ``summaries`` (:func:`skyref.audit.speed_map.entry_summary`, or the
+    ``entries`` of map.json): sky luminance RMS error against the cost of the first frame and of
+    each further frame, every measured entry labelled without overlaps
+    (:func:`labelled_pareto_figure`)."""
+    measured = [s for s in summaries if "frame_s" in s]
+    panels = ((f"one frame of {FRAME_DIRECTIONS:,} directions from scratch (s)", [s["frame_s"] for s in measured]),
+              ("each further frame, tables kept (s)",
+               [s["per_view_s"] + FRAME_DIRECTIONS * s["lookup_s"] for s in measured]))
+    return labelled_pareto_figure(panels, [100 * s["sky_rms_median"] for s in measured],
+                                  [s["family"] for s in measured],
+                                  {"path tracer": ("o", "C0"), "LUT": ("s", "C1"), "analytic": ("D", "C2")},
+                                  [f"{s['method']} {s['label']}" for s in measured],
+                                  "sky luminance RMS error (%), median of the map's skies")
 
 
 def plot_pareto(summaries: list[dict], path: str):
