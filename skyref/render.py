@@ -67,8 +67,8 @@ def sensor_dict(camera) -> dict:
 def build_integrator(scene, geometry: str = "spherical", wavelengths_per_path: int = 0,
                      estimator: str | None = None, polarized: bool = False):
     """An ``atmosphere`` integrator configured for ``scene`` (Mitsuba must be loaded), with the
-    ``estimator`` ``delta_tracking`` or ``line_integral`` (experimental; default: the
-    integrator's ``DEFAULT_ESTIMATOR``), transporting Stokes vectors if ``polarized``."""
+    ``estimator`` ``delta_tracking`` or ``line_integral`` (default: the scene's
+    ``render.estimator``), transporting Stokes vectors if ``polarized``."""
     import mitsuba as mi  # lazy: Mitsuba and its plugins are loaded by skyref.plugins.load_mitsuba
 
     from skyref.plugins.integrator import AtmosphereIntegrator
@@ -78,7 +78,7 @@ def build_integrator(scene, geometry: str = "spherical", wavelengths_per_path: i
                          scene.sun.angular_radius_deg, scene.sun.limb_darkening, scene.observer.altitude_m,
                          geometry=geometry, max_depth=scene.render.max_depth,
                          wavelengths_per_path=wavelengths_per_path, polarized=polarized,
-                         **({} if estimator is None else {"estimator": estimator}))
+                         estimator=scene.render.estimator if estimator is None else estimator)
     return integrator
 
 
@@ -101,14 +101,15 @@ def check_image_size(scene, passes: int) -> None:
                              "(cameras covering parts of the view), or with fewer passes or wavelengths")
 
 
-def _settings(scene, spp, passes, seed, polarized=None) -> RenderSettings:
-    """The scene's render settings with ``spp``, ``passes``, ``seed`` and ``polarized``
-    overridden (None: the scene's)."""
+def _settings(scene, spp, passes, seed, polarized=None, estimator=None) -> RenderSettings:
+    """The scene's render settings with ``spp``, ``passes``, ``seed``, ``polarized`` and
+    ``estimator`` overridden (None: the scene's); checked like the scene's own."""
     render = scene.render
     return dataclasses.replace(render, spp=render.spp if spp is None else spp,
                                passes=render.passes if passes is None else passes,
                                seed=render.seed if seed is None else seed,
-                               polarized=render.polarized if polarized is None else polarized)
+                               polarized=render.polarized if polarized is None else polarized,
+                               estimator=render.estimator if estimator is None else estimator)
 
 
 def rendered_pixels(scene) -> np.ndarray:
@@ -125,14 +126,13 @@ class _PixelRenderer:
     """The integrator and sensor of one scene, to trace any set of its pixels in passes; polarized
     if the scene's ``render.polarized`` says so."""
 
-    def __init__(self, scene, variant, geometry, wavelengths_per_path, estimator):
+    def __init__(self, scene, variant, geometry, wavelengths_per_path):
         check_choice("geometry", geometry, GEOMETRIES)
         scene.check_files()
         check_image_size(scene, scene.render.passes)
         self.mi = load_mitsuba(variant)
         self.scene, self.geometry = scene, geometry
-        self.integrator = build_integrator(scene, geometry, wavelengths_per_path, estimator,
-                                           polarized=scene.render.polarized)
+        self.integrator = build_integrator(scene, geometry, wavelengths_per_path, polarized=scene.render.polarized)
         self.sensor = self.mi.load_dict(sensor_dict(scene.camera))
         if scene.objects:
             try:
@@ -199,15 +199,15 @@ def render_sky(scene, spp: int | None = None, passes: int | None = None, seed: i
     metadata (samples, time, throughput, variant). Pixels outside the scene's
     ``render.region`` are not traced and are NaN. ``geometry="plane_parallel"`` flattens the
     planet (for comparisons with plane-parallel solvers such as DISORT); ``estimator`` picks
-    the integrator's estimator (see :data:`skyref.plugins.integrator.ESTIMATORS`).
-    ``polarized`` transports Stokes vectors (the ``delta_tracking`` estimator only): the sky
+    the integrator's estimator (:data:`skyref.scene.ESTIMATORS`; default: the scene's
+    ``render.estimator``). ``polarized`` transports Stokes vectors (either estimator): the sky
     then also has ``stokes`` (H, W, 4, N) and its radiance is I.
     """
-    settings = _settings(scene, spp, passes, seed, polarized)
+    settings = _settings(scene, spp, passes, seed, polarized, estimator)
     if settings.spp < settings.passes:
         raise ParameterError("spp", settings.spp, f">= passes ({settings.passes})", "too few samples")
     scene = scene.replace(render=settings)
-    renderer = _PixelRenderer(scene, variant, geometry, wavelengths_per_path, estimator)
+    renderer = _PixelRenderer(scene, variant, geometry, wavelengths_per_path)
     pixels = rendered_pixels(scene)
     spp_per_pass = settings.spp // settings.passes
 
@@ -295,7 +295,7 @@ def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, in
     if spp < passes:
         raise ParameterError("max_spp", max_spp, f">= passes ({passes})", "too few samples")
     scene = scene.replace(render=_settings(scene, spp, None, seeds[0]))
-    renderer = _PixelRenderer(scene, variant, "spherical", 0, None)
+    renderer = _PixelRenderer(scene, variant, "spherical", 0)
     pixels = rendered_pixels(scene)
     pool = PixelPool(pixels.size, len(ORDER_NAMES), len(scene.wavelengths_nm), stokes_components(scene))
     elapsed, used_seeds = 0.0, []

@@ -179,6 +179,13 @@ class Camera:
 
 
 PIXEL_SAMPLING = ("area", "centre")
+#: The ``atmosphere`` integrator's estimators (:mod:`skyref.plugins.integrator`), independent of each
+#: other: ``delta_tracking`` (spectral tracking with next-event estimation at every candidate
+#: point, the baseline) and ``line_integral`` (single scattering by quadrature along the camera
+#: ray, forced collisions; several times more efficient on pixel centres, see
+#: ``results/groundtruth_speed.md``, but its kernels take tens of seconds to compile).
+ESTIMATORS = ("delta_tracking", "line_integral")
+DEFAULT_ESTIMATOR = "delta_tracking"
 RENDER_REGIONS = ("all", "above_horizon")
 
 
@@ -192,7 +199,8 @@ class RenderSettings:
     ``"above_horizon"``, those whose centre looks at or above the observer's horizon (view
     zenith <= 90 deg; the others are NaN), for consumers of the sky alone. ``polarized``
     transports Stokes vectors (I, Q, U, V; :mod:`skyref.plugins.polarization`) instead of
-    radiance: the sky then has ``stokes`` too, and its radiance is I."""
+    radiance: the sky then has ``stokes`` too, and its radiance is I. ``estimator``: one of
+    :data:`ESTIMATORS`."""
 
     spp: int = 64
     seed: int = 0
@@ -201,6 +209,7 @@ class RenderSettings:
     pixel_sampling: str = "area"
     region: str = "all"
     polarized: bool = False
+    estimator: str = DEFAULT_ESTIMATOR
 
     def __post_init__(self):
         for name, lo, hi in (("spp", 1, 1 << 24), ("seed", 0, (1 << 31) - 1), ("passes", 2, 1024),
@@ -210,16 +219,20 @@ class RenderSettings:
                 raise ParameterError(f"render.{name}", value, f"an integer in [{lo}, {hi}]", "invalid")
         check_choice("render.pixel_sampling", self.pixel_sampling, PIXEL_SAMPLING)
         check_choice("render.region", self.region, RENDER_REGIONS)
+        check_choice("render.estimator", self.estimator, ESTIMATORS)
         if not isinstance(self.polarized, (bool, np.bool_)):
             raise ParameterError("render.polarized", self.polarized, "true or false", "not a boolean")
         object.__setattr__(self, "polarized", bool(self.polarized))
 
     def to_dict(self) -> dict:
-        """The settings as a TOML table; ``polarized`` only when true, so that a scalar scene is
-        written (in image headers, cache keys, batch fingerprints) as before it existed."""
+        """The settings as a TOML table; ``polarized`` only when true and ``estimator`` only when
+        not the default, so that a scene that uses neither is written (in image headers, cache
+        keys, batch fingerprints) as before they existed."""
         data = dataclasses.asdict(self)
         if not self.polarized:
             del data["polarized"]
+        if self.estimator == DEFAULT_ESTIMATOR:
+            del data["estimator"]
         return data
 
     @classmethod

@@ -163,3 +163,29 @@ def test_render_writes_exr_and_png(tmp_path, capsys):
     assert sky.radiance.shape == (8, 16, 3) and np.all(np.isfinite(sky.radiance))
     assert (tmp_path / "sky.png").stat().st_size > 0
     assert "median relative standard error" in capsys.readouterr().out
+
+
+def test_render_takes_the_estimator_from_the_scene_or_the_command_line(tmp_path, capsys):
+    """``[render] estimator`` picks the path tracer's estimator, ``--estimator`` overrides it, and
+    the EXR's metadata says which one rendered (pixel centres, where the line integral pays)."""
+    from skyref.io.exr import read_sky_exr
+
+    scene = write(tmp_path, '[camera]\nwidth = 8\nheight = 4\n[render]\nspp = 8\npasses = 2\n'
+                            'pixel_sampling = "centre"\nestimator = "line_integral"\n')
+    for extra, expected in (([], "line_integral"), (["--estimator", "delta_tracking"], "delta_tracking")):
+        exr = tmp_path / f"{expected}.exr"
+        assert main(["render", str(scene), "-o", str(exr), "-q", *extra]) == 0
+        sky = read_sky_exr(exr)
+        assert sky.metadata["estimator"] == expected and np.all(np.isfinite(sky.radiance))
+        assert sky.scene.render.estimator == expected
+
+
+def test_render_refuses_an_unknown_estimator_before_any_work(tmp_path, capsys):
+    scene = write(tmp_path, '[render]\nestimator = "path_guiding"\n')
+    assert main(["render", str(scene), "-o", str(tmp_path / "sky.exr")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("skyref render: error: render.estimator = 'path_guiding'")
+    with pytest.raises(SystemExit) as info:
+        main(["render", str(EARTH_CLEAR), "-o", str(tmp_path / "sky.exr"), "--estimator", "path_guiding"])
+    assert info.value.code == 2
+    assert not list(tmp_path.glob("*.exr"))

@@ -282,3 +282,16 @@ def test_save_scene_failure_keeps_previous_file(tmp_path, monkeypatch):
         save_scene(scene.replace(name="second"), path)
     assert path.read_bytes() == before
     assert os.listdir(tmp_path) == ["scene.toml"]
+
+
+def test_the_estimator_setting_is_checked_and_round_trips():
+    from skyref.errors import ParameterError
+    from skyref.scene import DEFAULT_ESTIMATOR, ESTIMATORS
+
+    assert "estimator" not in RenderSettings().to_dict()          # the default: scenes serialise as before
+    for estimator in ESTIMATORS:
+        settings = RenderSettings(estimator=estimator)
+        assert RenderSettings.from_dict(settings.to_dict()).estimator == estimator
+        assert ("estimator" in settings.to_dict()) == (estimator != DEFAULT_ESTIMATOR)
+    with pytest.raises(ParameterError, match=r"render.estimator = 'ratio'.*delta_tracking"):
+        RenderSettings(estimator="ratio")

@@ -105,7 +105,7 @@ from skyref.plugins.polarization import STOKES, StokesPath, stokes_times, unpola
 from skyref.plugins.quadrature import panel_levels
 from skyref.plugins.sobol import ScrambledSobolSampler, hash_combine
 from skyref.plugins.sun_optical_depth import SunOpticalDepth
-from skyref.scene import direction_from_angles
+from skyref.scene import DEFAULT_ESTIMATOR, ESTIMATORS, direction_from_angles
 from skyref.sky import ORDER_NAMES
 from skyref.validation import check_choice, check_number
 
@@ -133,12 +133,6 @@ SHADOW_ROULETTE = 0.05
 #: Russian roulette starts at this scattering order.
 ROULETTE_DEPTH = 3
 
-#: The estimators: ``delta_tracking`` (the default: spectral tracking with next-event estimation
-#: at every candidate point) and ``line_integral`` (experimental: single scattering by quadrature
-#: along every segment, forced collisions; see :mod:`skyref.plugins.line_integral` for where its
-#: quadrature does not yet meet its error bound), independent of each other.
-ESTIMATORS = ("line_integral", "delta_tracking")
-DEFAULT_ESTIMATOR = "delta_tracking"
 
 #: The line-integral estimator plays Russian roulette from this many vertices on, on paths whose
 #: largest channel throughput is below LINE_ROULETTE_THROUGHPUT (survival = throughput / it).
