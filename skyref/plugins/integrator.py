@@ -133,7 +133,6 @@ SHADOW_ROULETTE = 0.05
 #: Russian roulette starts at this scattering order.
 ROULETTE_DEPTH = 3
 
-
 #: The line-integral estimator plays Russian roulette from this many vertices on, on paths whose
 #: largest channel throughput is below LINE_ROULETTE_THROUGHPUT (survival = throughput / it).
 LINE_ROULETTE_DEPTH = 2
