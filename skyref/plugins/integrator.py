@@ -11,7 +11,8 @@ so that every path scatters; on the path's later segments the scattered sunlight
 ``SAMPLED_SUNLIGHT_POINTS`` stratified points drawn by the segment's lit scattering mass (one
 sun lookup each, where the quadrature pays one per node), so orders >= 2 stay unbiased Monte
 Carlo, drawn from scrambled Sobol points (:mod:`skyref.plugins.sobol`), with a sun lobe among
-the scattering directions where there is aerosol. For a fixed camera direction the camera
+the scattering directions where there is aerosol and a guide towards where the single-scattered
+light comes from (:mod:`skyref.plugins.guiding`). For a fixed camera direction the camera
 segment's light is traced apart, once per few paths. Its quadrature is within 1e-4 of a refined
 one (tests/test_line_integral.py) on clear and hazy skies up to the horizon, with a low sun's
 finite disk and at twilight (sun zenith 92-100 deg, where the panels also split at the points
@@ -99,6 +100,7 @@ from skyref.atmosphere.sun import SUN_ANGULAR_RADIUS_DEG, SunDisk
 from skyref.errors import ParameterError
 from skyref.plugins.drjit_namespace import xp
 from skyref.plugins.geometry import PlaneParallelSlab, SphericalShell
+from skyref.plugins.guiding import SingleScatteringGuide
 from skyref.plugins.line_integral import GreyProxy, LineIntegral
 from skyref.plugins.optics import AtmosphereOptics, atmosphere_from_property, direction_with_cosine
 from skyref.plugins.polarization import STOKES, StokesPath, stokes_times, unpolarized
@@ -147,6 +149,13 @@ SAMPLED_SUNLIGHT_POINTS = 4
 #: scattering is all aerosol (scaled by the aerosols' share; measured on the hazy sky, turbidity 6,
 #: sun zenith 60: 0.25 cut the variance of double scattering 10x, of 3+ orders 1.4x).
 SUN_LOBE_PROBABILITY = 0.3
+
+#: Probability with which a line-integral path draws its direction from the single-scattering
+#: guide (:mod:`skyref.plugins.guiding`) where Rayleigh scattering is all of the local scattering
+#: (scaled by its share). RGB, 2048 directions, against no guide: per-sample variance of the
+#: radiance 2.2x lower on the clear sky (sun zenith 60 deg), 2.7x at sunset (88 deg), 4.3x at
+#: twilight (96 deg), unchanged on the hazy sky (turbidity 6); 0.3 and 0.7 did no better.
+GUIDE_PROBABILITY = 0.5
 
 #: Most samples (lanes) one launch traces: bounds the path state (~100 bytes per sample and
 #: channel). Fewer, larger launches pay the Python tracing of the kernel once.
@@ -334,6 +343,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             self.line = LineIntegral(self.optics, self.geometry, SunOpticalDepth(atmosphere, self.geometry),
                                      levels, polarized=self.polarized,
                                      grazing_levels=levels if self.geometry.sun_can_graze(sun_zenith_deg) else ())
+            self.guide = SingleScatteringGuide(self.line, self.geometry, self.sun, self.wavelengths_nm)
         #: Optional Mitsuba scene whose shapes stand in the atmosphere (terrain, buildings):
         #: Lambertian, grey albedo = the mean of their BSDF's diffuse reflectance. Objects are
         #: traced by the delta-tracking estimator (the line integral assumes open sky).
@@ -761,7 +771,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         u_air = dr.minimum(vertex_sample.x / dr.maximum(p_air, 1e-30), 1.0 - 2.0 ** -24)
         x, hx, weight, (parts, sigma_s, _) = self.line.sample_collision(channels, quadrature, p, d, u_air)
         u_direction = mi.Point2f(vertex_sample.y, vertex_sample.z)
-        d_air, phase_weight = self._scatter_direction(parts, sigma_s, d, sampler.next_1d(), u_direction)
+        d_air, phase_weight = self._scatter_direction(parts, sigma_s, d, x, hx, sampler.next_1d(), u_direction)
         if self.polarized:
             _, reduced = self.optics.phase_matrix(parts, sigma_s, dr.clip(dr.dot(d, d_air), -1.0, 1.0))
             stokes, factor = stokes.scatter(d_air, d, reduced, in_air)
@@ -775,26 +785,42 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
                                  dr.select(in_air, air_throughput, ground_throughput), path.depth + 1, alive)
         return light, sun_disk, next_vertex, stokes
 
-    def _scatter_direction(self, parts, sigma_s, d, u_choice, u_direction):
-        """The direction a line-integral path takes at a scattering event (incident direction d)
-        and its weight p / pdf per channel. With probability ``sun_lobe_probability`` it is drawn
-        from a Henyey–Greenstein lobe around the sun (parameter ``sun_lobe_g``): light that
-        scatters once more on the way towards the sun meets the aerosol's forward peak there, which
-        the local phase function rarely sends a path into; otherwise from the local phase
-        function. The pdf is the mixture of both (one-sample MIS, balance heuristic)."""
-        optics, beta = self.optics, self.sun_lobe_probability
-        if beta == 0.0:
-            mu, pdf = optics.sample_phase(parts, sigma_s, u_choice, u_direction.x)
-            return direction_with_cosine(d, mu, u_direction.y), optics.phase(parts, sigma_s, mu) / pdf
-        lobe = u_choice < beta
-        u_component = dr.select(lobe, 0.0, (u_choice - beta) / (1.0 - beta))
-        mu_phase, _ = optics.sample_phase(parts, sigma_s, u_component, u_direction.x)
-        towards_sun = direction_with_cosine(self.sun.direction, sample_henyey_greenstein_cosine(
-            u_direction.x, self.sun_lobe_g, xp), u_direction.y)
-        direction = dr.select(lobe, towards_sun, direction_with_cosine(d, mu_phase, u_direction.y))
+    def _scatter_direction(self, parts, sigma_s, d, point, altitude, u_choice, u_direction):
+        """The direction a line-integral path takes at a scattering event (incident direction d,
+        at ``point`` and ``altitude``) and its weight p / pdf per channel. ``u_choice`` picks one
+        of three ways to draw it:
+
+        * with probability alpha = ``GUIDE_PROBABILITY`` x the local share of the scattering
+          without a forward peak (Rayleigh's), from the :class:`SingleScatteringGuide`: towards
+          where the sky's single-scattered light comes from (at twilight, the lit air low over
+          the sun's azimuth);
+        * with probability ``sun_lobe_probability``, from a Henyey–Greenstein lobe around the sun
+          (parameter ``sun_lobe_g``): light that scatters once more on the way towards the sun
+          meets the aerosol's forward peak there, which the local phase function rarely sends a
+          path into;
+        * otherwise from the local phase function.
+
+        The pdf is the mixture of the three (one-sample MIS, balance heuristic). The guide's share
+        follows the local mixture because an aerosol's forward peak is what carries light through
+        hazy air: guided with a fixed probability of 0.5, the variance of orders >= 3 on the hazy
+        sky (turbidity 6) grew 4x."""
+        optics, guide, beta = self.optics, self.guide, self.sun_lobe_probability
+        up = self.geometry.up(point)
+        alpha = GUIDE_PROBABILITY * optics.share_without_forward_peak(parts, sigma_s)
+        guided = u_choice < alpha
+        u_phase = dr.clip((u_choice - alpha - beta) / dr.maximum(1.0 - alpha - beta, 1e-30), 0.0, 1.0)
+        mu_phase, _ = optics.sample_phase(parts, sigma_s, u_phase, u_direction.x)
+        direction = direction_with_cosine(d, mu_phase, u_direction.y)
+        if beta > 0.0:
+            towards_sun = direction_with_cosine(self.sun.direction, sample_henyey_greenstein_cosine(
+                u_direction.x, self.sun_lobe_g, xp), u_direction.y)
+            direction = dr.select(~guided & (u_choice < alpha + beta), towards_sun, direction)
+        direction = dr.select(guided, guide.sample(up, altitude, u_choice / dr.maximum(alpha, 1e-30), u_direction.x,
+                                                   u_direction.y), direction)
         mu = dr.clip(dr.dot(d, direction), -1.0, 1.0)
-        pdf = ((1.0 - beta) * optics.phase_pdf(parts, sigma_s, mu)
-               + beta * henyey_greenstein_phase(dr.dot(self.sun.direction, direction), self.sun_lobe_g, xp))
+        pdf = (1.0 - alpha - beta) * optics.phase_pdf(parts, sigma_s, mu) + alpha * guide.pdf(up, altitude, direction)
+        if beta > 0.0:
+            pdf += beta * henyey_greenstein_phase(dr.dot(self.sun.direction, direction), self.sun_lobe_g, xp)
         return direction, optics.phase(parts, sigma_s, mu) / pdf
 
     @dr.syntax

@@ -1,0 +1,165 @@
+"""Where a line-integral path should scatter to: a guide built from the sky's single scattering.
+
+A path that scatters at a point x goes on along a direction omega, and the light it gathers
+there is, first of all, the sunlight scattered once along its next segment towards x: the
+single-scattered radiance L1(x, omega) arriving at x from omega. The phase function alone does not
+know where that light is: at twilight it comes from a few degrees around the sun's azimuth just
+above the horizon, where the air is still lit, and a path that scatters in the planet's shadow
+sends most of its directions elsewhere. :class:`SingleScatteringGuide` tabulates, per altitude,
+
+    L1(h, theta, phi),   theta the zenith angle of omega, phi its azimuth from the sun's,
+
+on the observer's vertical (altitudes h_i = H (i / (n - 1))^2, finer near the ground; theta in
+steps of 2 deg, phi in [0, 180] deg in steps of 5 deg: the sky is mirror-symmetric about the sun's
+vertical plane), each cell's value at its centre, computed with the same quadrature as the camera
+segment's single scattering (:meth:`skyref.plugins.line_integral.LineIntegral.integrate`) at the
+grid wavelengths nearest 440, 550 and 680 nm (their mean, times the solar irradiance). A cell's
+probability is its L1 x solid angle plus ``GUIDE_FLOOR`` of the layer's mean, so that no
+direction is out of reach. Directions are drawn from the layer below or above the point's altitude
+(stochastically, by where it lies between them), a cell by its probability, uniformly in cos theta
+and phi within the cell, phi's sign at random; the density of a direction (sr^-1) is the same
+mixture of the two layers' cells.
+
+At a point elsewhere than above the observer, the guide is read in the local frame (local zenith,
+the sun's local azimuth): the sun's elevation there differs, and the guide is then only an
+approximation of L1 — it is a sampling density, so the estimate stays unbiased whatever its
+quality. The integrator mixes it with the phase function's own sampling (one-sample multiple
+importance sampling, balance heuristic).
+
+References
+----------
+E. Veach and L. J. Guibas, "Optimally Combining Sampling Techniques for Monte Carlo Rendering",
+SIGGRAPH 1995 (one-sample MIS).
+"""
+
+from __future__ import annotations
+
+import math
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from skyref.plugins.line_integral import GreyProxy
+
+__all__ = ["GUIDE_LAYERS", "GUIDE_ZENITH_BINS", "GUIDE_AZIMUTH_BINS", "GUIDE_FLOOR", "SingleScatteringGuide"]
+
+#: Altitude layers of the table (quadratic in altitude, 0 to the top of the atmosphere).
+GUIDE_LAYERS = 24
+
+#: Zenith-angle bins (0-180 deg) and azimuth bins (0-180 deg from the sun's azimuth). Twice finer in
+#: zenith changed the variance at twilight by less than its noise (measured, sun zenith 96 deg).
+GUIDE_ZENITH_BINS = 90
+GUIDE_AZIMUTH_BINS = 36
+
+#: Share of a layer's mean spread uniformly (in solid angle) over its cells.
+GUIDE_FLOOR = 0.05
+
+#: Wavelengths (nm) at which the table's single scattering is computed: the grid's nearest.
+GUIDE_WAVELENGTHS_NM = (440.0, 550.0, 680.0)
+
+
+def _sun_frame(up, sun):
+    """The local horizontal unit vectors towards the sun's azimuth and 90 deg from it (any
+    horizontal pair where the sun is at the local zenith)."""
+    horizontal = sun - dr.dot(sun, up) * up
+    length = dr.norm(horizontal)
+    towards_sun = dr.select(length > 1e-6, horizontal / dr.maximum(length, 1e-30), mi.coordinate_system(up)[0])
+    return towards_sun, dr.cross(up, towards_sun)
+
+
+class SingleScatteringGuide:
+    """The tabulated guide (module docstring) for the ``line`` integral of an atmosphere in
+    ``geometry``, lit by ``sun`` (the integrator's :class:`~skyref.plugins.integrator.SunLight`)."""
+
+    def __init__(self, line, geometry, sun, wavelengths_nm):
+        self.sun_direction = sun.direction
+        self.top = float(geometry.H)
+        self.cells = GUIDE_ZENITH_BINS * GUIDE_AZIMUTH_BINS
+        self.azimuth_step = math.pi / GUIDE_AZIMUTH_BINS
+        zenith_edges = np.linspace(0.0, math.pi, GUIDE_ZENITH_BINS + 1)
+        cos_edges = np.cos(zenith_edges)
+        #: solid angle of one cell of each zenith bin (one side of the sun's plane), sr
+        cell_solid_angle = (cos_edges[:-1] - cos_edges[1:]) * self.azimuth_step
+        radiance = self._single_scattering(line, geometry, sun, wavelengths_nm, zenith_edges)
+        mass = np.maximum(radiance, 0.0) * cell_solid_angle[None, :, None]
+        layer_mass = mass.sum(axis=(1, 2), keepdims=True)
+        mass = mass + GUIDE_FLOOR * layer_mass * cell_solid_angle[None, :, None] / (2.0 * math.pi)
+        probability = (mass / mass.sum(axis=(1, 2), keepdims=True)).reshape(GUIDE_LAYERS, -1)
+        cumulative = np.cumsum(probability, axis=1)
+        cumulative[:, -1] = 1.0
+        self.probability = mi.Float(probability.ravel().astype(np.float32))
+        self.cumulative = mi.Float(cumulative.ravel().astype(np.float32))
+        self.cos_edges = mi.Float(cos_edges.astype(np.float32))
+        self.cell_solid_angle = mi.Float(cell_solid_angle.astype(np.float32))
+
+    def _single_scattering(self, line, geometry, sun, wavelengths_nm, zenith_edges):
+        """L1 at the centres of the cells, (layers, zenith bins, azimuth bins), per unit
+        radiance of the grid's mean (W m^-2 sr^-1 nm^-1 up to one constant factor)."""
+        layer, j, k = np.meshgrid(np.arange(GUIDE_LAYERS), np.arange(GUIDE_ZENITH_BINS),
+                                  np.arange(GUIDE_AZIMUTH_BINS), indexing="ij")
+        theta = 0.5 * (zenith_edges[j] + zenith_edges[j + 1])
+        phi = (k + 0.5) * self.azimuth_step
+        altitude = self.layer_altitudes()[layer]
+        up = mi.Vector3f(0.0, 0.0, 1.0)                         # the observer's vertical
+        towards_sun, across = _sun_frame(up, self.sun_direction)
+        sin_theta, cos_theta = mi.Float(np.sin(theta).ravel()), mi.Float(np.cos(theta).ravel())
+        d = (sin_theta * mi.Float(np.cos(phi).ravel())) * towards_sun \
+            + (sin_theta * mi.Float(np.sin(phi).ravel())) * across + cos_theta * up
+        p = mi.Point3f(0.0, 0.0, mi.Float(altitude.ravel().astype(np.float32)) - geometry.h0)
+        h = geometry.altitude(p)
+        length = dr.minimum(geometry.distance_to_ground(p, d, h), geometry.distance_to_top(p, d, h))
+        wavelengths_nm = np.asarray(wavelengths_nm)
+        indices = [mi.UInt32(i) for i in sorted({int(np.argmin(np.abs(wavelengths_nm - w)))
+                                                 for w in GUIDE_WAVELENGTHS_NM})]
+        channels = line.optics.channel_coefficients(indices)
+        light, _, _ = line.integrate(channels, p, d, h, length, self.sun_direction,
+                                     GreyProxy(channels, channels.zeros() + 1.0))
+        e_sun = sun.channel_irradiance(indices)
+        radiance = dr.mean(mi.ArrayXf([light[c] * e_sun[c] for c in range(len(indices))]), axis=0)
+        return radiance.numpy().astype(np.float64).reshape(layer.shape)
+
+    def layer_altitudes(self) -> np.ndarray:
+        """The layers' altitudes h_i = H (i / (n - 1))^2, m."""
+        return self.top * (np.arange(GUIDE_LAYERS) / (GUIDE_LAYERS - 1)) ** 2
+
+    def _layers(self, altitude):
+        """The layer just below ``altitude`` and the fraction of the way to the next one."""
+        position = dr.sqrt(dr.clip(altitude / self.top, 0.0, 1.0)) * (GUIDE_LAYERS - 1)
+        below = dr.minimum(mi.UInt32(position), GUIDE_LAYERS - 2)
+        return below, position - mi.Float(below)
+
+    def sample(self, up, altitude, u_layer, u_cell, u_azimuth):
+        """A unit direction at a point with local zenith ``up`` and ``altitude`` (m), from three
+        uniform numbers (the layer; the cell, then cos theta within it; phi within the cell and
+        its sign)."""
+        below, fraction = self._layers(altitude)
+        layer = dr.select(u_layer < fraction, below + 1, below)
+        offset = layer * self.cells
+        cell = dr.binary_search(0, self.cells - 1,
+                                lambda c: dr.gather(mi.Float, self.cumulative, offset + c) <= u_cell)
+        upper = dr.gather(mi.Float, self.cumulative, offset + cell)
+        lower = dr.select(cell > 0, dr.gather(mi.Float, self.cumulative, offset + cell - 1, cell > 0), 0.0)
+        within = dr.clip((u_cell - lower) / dr.maximum(upper - lower, 1e-30), 0.0, 1.0)
+        zenith_bin, azimuth_bin = cell // GUIDE_AZIMUTH_BINS, cell % GUIDE_AZIMUTH_BINS
+        cos_top = dr.gather(mi.Float, self.cos_edges, zenith_bin)
+        cos_theta = cos_top - within * (cos_top - dr.gather(mi.Float, self.cos_edges, zenith_bin + 1))
+        mirrored = u_azimuth < 0.5
+        phi = (mi.Float(azimuth_bin) + dr.select(mirrored, 2.0 * u_azimuth, 2.0 * u_azimuth - 1.0)) * self.azimuth_step
+        sin_phi, cos_phi = dr.sincos(dr.select(mirrored, -phi, phi))
+        towards_sun, across = _sun_frame(up, self.sun_direction)
+        sin_theta = dr.safe_sqrt(1.0 - cos_theta * cos_theta)
+        return (sin_theta * cos_phi) * towards_sun + (sin_theta * sin_phi) * across + cos_theta * up
+
+    def pdf(self, up, altitude, direction):
+        """Density (sr^-1) with which :meth:`sample` produces the unit ``direction``."""
+        below, fraction = self._layers(altitude)
+        towards_sun, across = _sun_frame(up, self.sun_direction)
+        theta = dr.acos(dr.clip(dr.dot(direction, up), -1.0, 1.0))
+        zenith_bin = dr.minimum(mi.UInt32(theta * (GUIDE_ZENITH_BINS / math.pi)), GUIDE_ZENITH_BINS - 1)
+        phi = dr.atan2(dr.abs(dr.dot(direction, across)), dr.dot(direction, towards_sun))
+        azimuth_bin = dr.minimum(mi.UInt32(phi / self.azimuth_step), GUIDE_AZIMUTH_BINS - 1)
+        cell = below * self.cells + zenith_bin * GUIDE_AZIMUTH_BINS + azimuth_bin
+        probability = ((1.0 - fraction) * dr.gather(mi.Float, self.probability, cell)
+                       + fraction * dr.gather(mi.Float, self.probability, cell + self.cells))
+        return probability / (2.0 * dr.gather(mi.Float, self.cell_solid_angle, zenith_bin))
