@@ -162,10 +162,10 @@ def test_forward_derivative_matches_finite_difference_slow(mi, integ, name):
 # 0.8e-9) and the difference of independent renders 1500 DU apart agreed with it.
 
 #: Samples per direction and seed, and seeds, of each estimator: the standard error of the
-#: difference is 0.04% (ground albedo) to 0.27% of the derivative on each parameter's
-#: best-determined element (measured), so a bias of 1.1% fails (|z| < 4).
+#: difference is 0.04% (ground albedo) to 0.19% (ozone, g) of the derivative on each parameter's
+#: best-determined element (measured on the CI parameters), so a bias of 0.8% fails (|z| < 4).
 LINE_INTEGRAL_SPP, LINE_INTEGRAL_SEEDS = 1024, 8
-DELTA_TRACKING_SPP, DELTA_TRACKING_SEEDS = 32768, 16
+DELTA_TRACKING_SPP, DELTA_TRACKING_SEEDS = 32768, 32
 
 #: Checked in CI (an absorber, a phase function, the ground); the slow tier checks every parameter
 #: (about 9 minutes: each parameter's derivative compiles its own line-integral kernels).

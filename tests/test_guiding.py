@@ -31,15 +31,10 @@ def twilight(mi):
     return build_integrator(scene, estimator="line_integral")
 
 
-def local_point(mi, integ, distance, altitude):
-    """A point ``distance`` along the ground northwards from the observer, at ``altitude``, and
-    its local zenith."""
-    geometry = integ.geometry
-    angle = distance / geometry.R
-    radius = geometry.R + altitude
-    up = np.array([0.0, math.sin(angle), math.cos(angle)])
-    point = radius * up - np.array([0.0, 0.0, geometry.R + geometry.h0])
-    return point, up
+def local_zenith(integ, distance):
+    """The local zenith at ``distance`` along the ground northwards from the observer."""
+    angle = distance / integ.geometry.R
+    return np.array([0.0, math.sin(angle), math.cos(angle)])
 
 
 def local_directions(up, sun, cos_theta, phi):
@@ -87,7 +82,7 @@ def sun_vector(integ):
 
 @pytest.mark.parametrize("distance, altitude", POINTS)
 def test_guide_density_integrates_to_one(mi, twilight, distance, altitude):
-    _, up = local_point(mi, twilight, distance, altitude)
+    up = local_zenith(twilight, distance)
     probabilities = bin_probabilities(mi, twilight, up, altitude, np.array([-1.0, 1.0]),
                                       np.array([-math.pi, math.pi]))
     total = float(probabilities.sum())
@@ -98,7 +93,7 @@ def test_guide_density_integrates_to_one(mi, twilight, distance, altitude):
 def test_guide_samples_follow_its_density(mi, twilight, distance, altitude):
     import drjit as dr
 
-    _, up = local_point(mi, twilight, distance, altitude)
+    up = local_zenith(twilight, distance)
     sun = sun_vector(twilight)
     n = 1 << 20
     rng = np.random.default_rng(7)
@@ -126,7 +121,7 @@ def test_guide_points_at_the_twilight_glow(mi, twilight):
     """At twilight the single-scattered light at the ground comes from low over the sun's
     azimuth: the guide puts most of its density within 45 deg of that azimuth and 30 deg of the
     horizon (checked on its table, at the ground layer)."""
-    _, up = local_point(mi, twilight, 0.0, 0.0)
+    up = local_zenith(twilight, 0.0)
     glow = bin_probabilities(mi, twilight, up, 0.0, np.array([0.0, math.sin(math.radians(30.0))]),
                              np.radians([-45.0, 45.0]))
     assert glow.sum() > 0.5, glow
