@@ -73,7 +73,7 @@ def guide_pdf(mi, integ, up, altitude, directions):
     n = len(directions)
     d = mi.Vector3f(*(mi.Float(directions[:, i].astype(np.float32)) for i in range(3)))
     u = mi.Vector3f(*(mi.Float(np.full(n, up[i], np.float32)) for i in range(3)))
-    return integ.guide.pdf(u, mi.Float(np.full(n, altitude, np.float32)), d).numpy().astype(np.float64)
+    return integ.guide.at(u, mi.Float(np.full(n, altitude, np.float32))).pdf(d).numpy().astype(np.float64)
 
 
 def sun_vector(integ):
@@ -99,7 +99,7 @@ def test_guide_samples_follow_its_density(mi, twilight, distance, altitude):
     rng = np.random.default_rng(7)
     u = [mi.Float(rng.random(n, dtype=np.float32)) for _ in range(3)]
     up_v = mi.Vector3f(*(mi.Float(np.full(n, up[i], np.float32)) for i in range(3)))
-    d = twilight.guide.sample(up_v, mi.Float(np.full(n, altitude, np.float32)), *u)
+    d = twilight.guide.at(up_v, mi.Float(np.full(n, altitude, np.float32))).sample(*u)
     d = np.stack([np.asarray(dr.detach(d[i]).numpy(), np.float64) for i in range(3)], axis=1)
     assert np.allclose(np.linalg.norm(d, axis=1), 1.0, atol=1e-5)
     horizontal = sun - np.dot(sun, up) * up

@@ -104,6 +104,13 @@ class PhaseFunction:
         """The Henyey–Greenstein parameter of the sampling density."""
         raise NotImplementedError
 
+    @property
+    def has_forward_peak(self) -> bool:
+        """Whether the function scatters mostly forwards (asymmetry parameter > 0: aerosols, not
+        Rayleigh): the line integral aims its sun lobe at such peaks and guides paths only
+        through the scattering without one."""
+        return self.asymmetry > 0.0
+
     def sample_cosine(self, u, xp=np, g=None):
         return sample_henyey_greenstein_cosine(u, self.sampling_g if g is None else g, xp)
 

@@ -42,7 +42,7 @@ import numpy as np
 
 from skyref.plugins.line_integral import GreyProxy
 
-__all__ = ["GUIDE_LAYERS", "GUIDE_ZENITH_BINS", "GUIDE_AZIMUTH_BINS", "GUIDE_FLOOR", "SingleScatteringGuide"]
+__all__ = ["GUIDE_LAYERS", "GUIDE_ZENITH_BINS", "GUIDE_AZIMUTH_BINS", "GUIDE_FLOOR", "SingleScatteringGuide", "GuideAtVertex"]
 
 #: Altitude layers of the table (quadratic in altitude, 0 to the top of the atmosphere).
 GUIDE_LAYERS = 24
@@ -123,43 +123,51 @@ class SingleScatteringGuide:
         """The layers' altitudes h_i = H (i / (n - 1))^2, m."""
         return self.top * (np.arange(GUIDE_LAYERS) / (GUIDE_LAYERS - 1)) ** 2
 
-    def _layers(self, altitude):
-        """The layer just below ``altitude`` and the fraction of the way to the next one."""
+    def at(self, up, altitude) -> "GuideAtVertex":
+        """The guide at scattering vertices with local zenith ``up`` and ``altitude`` (m): the
+        layers around them and the sun's local frame, shared by its sample and pdf."""
         position = dr.sqrt(dr.clip(altitude / self.top, 0.0, 1.0)) * (GUIDE_LAYERS - 1)
         below = dr.minimum(mi.UInt32(position), GUIDE_LAYERS - 2)
-        return below, position - mi.Float(below)
+        return GuideAtVertex(self, up, below, position - mi.Float(below))
 
-    def sample(self, up, altitude, u_layer, u_cell, u_azimuth):
-        """A unit direction at a point with local zenith ``up`` and ``altitude`` (m), from three
-        uniform numbers (the layer; the cell, then cos theta within it; phi within the cell and
-        its sign)."""
-        below, fraction = self._layers(altitude)
-        layer = dr.select(u_layer < fraction, below + 1, below)
-        offset = layer * self.cells
-        cell = dr.binary_search(0, self.cells - 1,
-                                lambda c: dr.gather(mi.Float, self.cumulative, offset + c) <= u_cell)
-        upper = dr.gather(mi.Float, self.cumulative, offset + cell)
-        lower = dr.select(cell > 0, dr.gather(mi.Float, self.cumulative, offset + cell - 1, cell > 0), 0.0)
+
+class GuideAtVertex:
+    """A :class:`SingleScatteringGuide` at vertices: ``below``, the layer just under them, and
+    ``fraction``, how far they are on the way to the next one (the layer is drawn between the
+    two); ``towards_sun`` and ``across``, the horizontal unit vectors the azimuths count from."""
+
+    def __init__(self, guide, up, below, fraction):
+        self.guide, self.up, self.below, self.fraction = guide, up, below, fraction
+        self.towards_sun, self.across = _sun_frame(up, guide.sun_direction)
+
+    def sample(self, u_layer, u_cell, u_azimuth):
+        """A unit direction from three uniform numbers (the layer; the cell, then cos theta
+        within it; phi within the cell and its sign)."""
+        guide = self.guide
+        layer = dr.select(u_layer < self.fraction, self.below + 1, self.below)
+        offset = layer * guide.cells
+        cell = dr.binary_search(0, guide.cells - 1,
+                                lambda c: dr.gather(mi.Float, guide.cumulative, offset + c) <= u_cell)
+        upper = dr.gather(mi.Float, guide.cumulative, offset + cell)
+        lower = dr.select(cell > 0, dr.gather(mi.Float, guide.cumulative, offset + cell - 1, cell > 0), 0.0)
         within = dr.clip((u_cell - lower) / dr.maximum(upper - lower, 1e-30), 0.0, 1.0)
         zenith_bin, azimuth_bin = cell // GUIDE_AZIMUTH_BINS, cell % GUIDE_AZIMUTH_BINS
-        cos_top = dr.gather(mi.Float, self.cos_edges, zenith_bin)
-        cos_theta = cos_top - within * (cos_top - dr.gather(mi.Float, self.cos_edges, zenith_bin + 1))
+        cos_top = dr.gather(mi.Float, guide.cos_edges, zenith_bin)
+        cos_theta = cos_top - within * (cos_top - dr.gather(mi.Float, guide.cos_edges, zenith_bin + 1))
         mirrored = u_azimuth < 0.5
-        phi = (mi.Float(azimuth_bin) + dr.select(mirrored, 2.0 * u_azimuth, 2.0 * u_azimuth - 1.0)) * self.azimuth_step
+        phi = (mi.Float(azimuth_bin) + dr.select(mirrored, 2.0 * u_azimuth, 2.0 * u_azimuth - 1.0)) * guide.azimuth_step
         sin_phi, cos_phi = dr.sincos(dr.select(mirrored, -phi, phi))
-        towards_sun, across = _sun_frame(up, self.sun_direction)
         sin_theta = dr.safe_sqrt(1.0 - cos_theta * cos_theta)
-        return (sin_theta * cos_phi) * towards_sun + (sin_theta * sin_phi) * across + cos_theta * up
+        return (sin_theta * cos_phi) * self.towards_sun + (sin_theta * sin_phi) * self.across + cos_theta * self.up
 
-    def pdf(self, up, altitude, direction):
+    def pdf(self, direction):
         """Density (sr^-1) with which :meth:`sample` produces the unit ``direction``."""
-        below, fraction = self._layers(altitude)
-        towards_sun, across = _sun_frame(up, self.sun_direction)
-        theta = dr.acos(dr.clip(dr.dot(direction, up), -1.0, 1.0))
+        guide = self.guide
+        theta = dr.acos(dr.clip(dr.dot(direction, self.up), -1.0, 1.0))
         zenith_bin = dr.minimum(mi.UInt32(theta * (GUIDE_ZENITH_BINS / math.pi)), GUIDE_ZENITH_BINS - 1)
-        phi = dr.atan2(dr.abs(dr.dot(direction, across)), dr.dot(direction, towards_sun))
-        azimuth_bin = dr.minimum(mi.UInt32(phi / self.azimuth_step), GUIDE_AZIMUTH_BINS - 1)
-        cell = below * self.cells + zenith_bin * GUIDE_AZIMUTH_BINS + azimuth_bin
-        probability = ((1.0 - fraction) * dr.gather(mi.Float, self.probability, cell)
-                       + fraction * dr.gather(mi.Float, self.probability, cell + self.cells))
-        return probability / (2.0 * dr.gather(mi.Float, self.cell_solid_angle, zenith_bin))
+        phi = dr.atan2(dr.abs(dr.dot(direction, self.across)), dr.dot(direction, self.towards_sun))
+        azimuth_bin = dr.minimum(mi.UInt32(phi / guide.azimuth_step), GUIDE_AZIMUTH_BINS - 1)
+        cell = self.below * guide.cells + zenith_bin * GUIDE_AZIMUTH_BINS + azimuth_bin
+        probability = ((1.0 - self.fraction) * dr.gather(mi.Float, guide.probability, cell)
+                       + self.fraction * dr.gather(mi.Float, guide.probability, cell + guide.cells))
+        return probability / (2.0 * dr.gather(mi.Float, guide.cell_solid_angle, zenith_bin))

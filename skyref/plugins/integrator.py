@@ -334,6 +334,8 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         self.sun = SunLight(direction_from_angles(sun_zenith_deg, sun_azimuth_deg),
                             SunDisk(sun_angular_radius_deg, bool(limb_darkening)), self.wavelengths_nm)
         self.sun_lobe_g, self.sun_lobe_probability = self._sun_lobe(atmosphere)
+        # kernel copies (opaque: a new turbidity or aerosol g reuses the compiled kernels)
+        self._sun_lobe_kernel = (dr.opaque(mi.Float, self.sun_lobe_g), dr.opaque(mi.Float, self.sun_lobe_probability))
         #: Altitude over which one majorant of the delta tracking holds (the smallest scale height
         #: of an exponential profile; inf: the whole segment).
         self.majorant_drop = min((float(c.profile.scale_height_m) for c in atmosphere.constituents
@@ -343,7 +345,10 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             self.line = LineIntegral(self.optics, self.geometry, SunOpticalDepth(atmosphere, self.geometry),
                                      levels, polarized=self.polarized,
                                      grazing_levels=levels if self.geometry.sun_can_graze(sun_zenith_deg) else ())
-            self.guide = SingleScatteringGuide(self.line, self.geometry, self.sun, self.wavelengths_nm)
+            # paths turn at scattering events only with max_depth > 1 (single scattering alone
+            # needs no guide: 0.3 s of CPU and, per atmosphere, a compile of 20-55 s saved)
+            self.guide = (SingleScatteringGuide(self.line, self.geometry, self.sun, self.wavelengths_nm)
+                          if self.max_depth > 1 else None)
         #: Optional Mitsuba scene whose shapes stand in the atmosphere (terrain, buildings):
         #: Lambertian, grey albedo = the mean of their BSDF's diffuse reflectance. Objects are
         #: traced by the delta-tracking estimator (the line integral assumes open sky).
@@ -354,15 +359,15 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         peaked aerosol's sampling density, and drawn with probability SUN_LOBE_PROBABILITY x the
         aerosols' share of the vertical scattering optical depth at the grid's middle wavelength
         (a Rayleigh sky has no forward peak to aim at; on the clear preset, 5% aerosol, a fixed
-        probability of 0.25 raised the variance of double scattering by half). A phase function
-        has a forward peak if its asymmetry parameter is positive. Returns (g, P)."""
+        probability of 0.25 raised the variance of double scattering by half). Returns (g, P),
+        Python floats."""
         middle = [float(np.median(self.wavelengths_nm))]
         depths, peaks = {}, []
         for constituent in atmosphere.constituents:
             if constituent.phase is None:
                 continue
             column = constituent.profile.column_above(0.0, atmosphere.thickness_m, np)
-            peaked = constituent.phase.asymmetry > 0.0          # a forward peak to aim at
+            peaked = constituent.phase.has_forward_peak
             depths[peaked] = depths.get(peaked, 0.0) + float(constituent.scattering_coefficient(middle)[0] * column)
             if peaked:
                 peaks.append(constituent.phase.sampling_g)
@@ -682,12 +687,14 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         # Polarized: the path's Mueller matrix (w N, polarization.py) starts in the camera's frame.
         stokes = StokesPath.camera(d, self.geometry.up(mi.Point3f(origin)), channels.count) if self.polarized else None
 
+        goes_on = orders != "single" and self.max_depth > 1
         light, sun_disk, path, stokes = self._line_segment(sampler, channels, e_sun, camera, stokes, camera=True,
                                                            rising_only=self.geometry.h0 == 0.0,
-                                                           sunlight=None if orders == "multiple" else "quadrature")
+                                                           sunlight=None if orders == "multiple" else "quadrature",
+                                                           goes_on=goes_on)
         radiance.direct += sun_disk
         radiance.single += light
-        if orders != "single":
+        if goes_on:
             self._scattered_light(sampler, channels, e_sun, path, stokes, radiance)
         orders = radiance.by_order()
         # the solar disk seen through the atmosphere is unpolarized
@@ -711,7 +718,8 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             path.throughput = dr.select(roulette & survives, path.throughput / survival, path.throughput)
             path.alive &= ~(roulette & ~survives) & (path.depth < self.max_depth)
 
-    def _line_segment(self, sampler, channels, e_sun, path, stokes, camera, rising_only, sunlight="quadrature"):
+    def _line_segment(self, sampler, channels, e_sun, path, stokes, camera, rising_only, sunlight="quadrature",
+                      goes_on=True):
         """One segment of a line-integral ``path`` (a :class:`PathVertex`, with its
         :class:`StokesPath` ``stokes`` when polarized, else None) from its vertex along its
         direction. Returns (the light gathered along the segment: sunlight scattered once on it,
@@ -720,7 +728,8 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         one event deeper; its StokesPath there). ``sunlight``:
         the segment's scattered sunlight by ``"quadrature"`` or ``"sampled"`` at
         ``SAMPLED_SUNLIGHT_POINTS`` points (:meth:`LineIntegral.sampled_sunlight`), or None: not
-        computed (the light is 0), only where the path goes on."""
+        computed (the light is 0), only where the path goes on. ``goes_on`` False: the path
+        ends here (single scattering alone), and the next vertex returned is None."""
         geometry, optics, sun = self.geometry, self.optics, self.sun
         p, d, h, throughput, alive = path.point, path.direction, path.altitude, path.throughput, path.alive
         t_ground = geometry.distance_to_ground(p, d, h)
@@ -759,6 +768,8 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             light += dr.select(on_ground & (cos_sun > 0.0), reflected, 0.0)
             light = dr.select(alive, light, 0.0)
 
+        if not goes_on:
+            return light, sun_disk, None, stokes
         # -- where the path goes on: a forced collision in the air, or the ground --------------------
         air_mass = sum(quadrature.masses, mi.Float(0.0))
         ground_mass = dr.select(on_ground, grey.transmittance(quadrature.total) * grey.albedo, 0.0)
@@ -804,23 +815,24 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         follows the local mixture because an aerosol's forward peak is what carries light through
         hazy air: guided with a fixed probability of 0.5, the variance of orders >= 3 on the hazy
         sky (turbidity 6) grew 4x."""
-        optics, guide, beta = self.optics, self.guide, self.sun_lobe_probability
-        up = self.geometry.up(point)
+        optics, guide = self.optics, self.guide.at(self.geometry.up(point), altitude)
+        lobe = self.sun_lobe_probability > 0.0
+        g, beta = self._sun_lobe_kernel if lobe else (0.0, 0.0)
         alpha = GUIDE_PROBABILITY * optics.share_without_forward_peak(parts, sigma_s)
         guided = u_choice < alpha
         u_phase = dr.clip((u_choice - alpha - beta) / dr.maximum(1.0 - alpha - beta, 1e-30), 0.0, 1.0)
         mu_phase, _ = optics.sample_phase(parts, sigma_s, u_phase, u_direction.x)
         direction = direction_with_cosine(d, mu_phase, u_direction.y)
-        if beta > 0.0:
+        if lobe:
             towards_sun = direction_with_cosine(self.sun.direction, sample_henyey_greenstein_cosine(
-                u_direction.x, self.sun_lobe_g, xp), u_direction.y)
+                u_direction.x, g, xp), u_direction.y)
             direction = dr.select(~guided & (u_choice < alpha + beta), towards_sun, direction)
-        direction = dr.select(guided, guide.sample(up, altitude, u_choice / dr.maximum(alpha, 1e-30), u_direction.x,
-                                                   u_direction.y), direction)
+        direction = dr.select(guided, guide.sample(u_choice / dr.maximum(alpha, 1e-30), u_direction.x, u_direction.y),
+                              direction)
         mu = dr.clip(dr.dot(d, direction), -1.0, 1.0)
-        pdf = (1.0 - alpha - beta) * optics.phase_pdf(parts, sigma_s, mu) + alpha * guide.pdf(up, altitude, direction)
-        if beta > 0.0:
-            pdf += beta * henyey_greenstein_phase(dr.dot(self.sun.direction, direction), self.sun_lobe_g, xp)
+        pdf = (1.0 - alpha - beta) * optics.phase_pdf(parts, sigma_s, mu) + alpha * guide.pdf(direction)
+        if lobe:
+            pdf += beta * henyey_greenstein_phase(dr.dot(self.sun.direction, direction), g, xp)
         return direction, optics.phase(parts, sigma_s, mu) / pdf
 
     @dr.syntax

@@ -257,9 +257,9 @@ class AtmosphereOptics:
     def share_without_forward_peak(self, sigma_s_parts, sigma_s):
         """The share of the local scattering (mean over channels, detached, as the probabilities
         of :meth:`sample_phase`) by constituents whose phase function has no forward peak
-        (asymmetry parameter <= 0: Rayleigh)."""
+        (``PhaseFunction.has_forward_peak``: Rayleigh's has none)."""
         comps, probabilities = self._sampling_mixture(sigma_s_parts, sigma_s)
-        return sum((p for c, p in zip(comps, probabilities) if c.model.phase.asymmetry <= 0.0), mi.Float(0.0))
+        return sum((p for c, p in zip(comps, probabilities) if not c.model.phase.has_forward_peak), mi.Float(0.0))
 
     def phase_pdf(self, sigma_s_parts, sigma_s, mu):
         """Density (sr^-1) with which :meth:`sample_phase` produces the cosine ``mu``: the
