@@ -2,9 +2,11 @@
 give the same sky as skyref's own render loop, and its parameters live in ``mi.traverse``."""
 
 import numpy as np
+import pytest
 
 import skyref.atmosphere as A
-from skyref.scene import Camera, Scene, Sun
+from skyref.atmosphere.sun import SUN_ANGULAR_RADIUS_DEG
+from skyref.scene import ESTIMATORS, Camera, Scene, Sun
 
 PLUGIN = {"type": "atmosphere", "atmosphere": "bruneton2017", "wavelengths": "rgb",
           "sun_zenith": 70.0, "sun_azimuth": 180.0}
@@ -39,3 +41,36 @@ def test_parameters_in_traverse(mi):
     params["aerosol.g"] = mi.Float(0.5)
     params.update()
     assert abs(integrator.optics.parameters()["aerosol.g"][0] - 0.5) < 1e-7
+
+
+@pytest.mark.parametrize("estimator", ESTIMATORS)
+def test_new_sample_counts_reuse_the_compiled_path_kernels(mi, estimator):
+    """Renders with other numbers of samples, directions, seeds and a new turbidity launch the
+    same kernels, by hash: nothing per launch is baked into the path tracer. (``dr.mean`` over a
+    path's channels baked the lane count in, so each round of an adaptive render compiled the
+    path tracer again: 3-24 s for the line integral; the sun lobe's probability baked the
+    turbidity in.)"""
+    import drjit as dr
+
+    from skyref.plugins.integrator import AtmosphereIntegrator
+
+    rng = np.random.default_rng(3)
+    hashes = []
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        for turbidity, count, spp, seed in [(2.0, 64, 2, 1), (2.0, 96, 3, 2), (4.0, 40, 5, 3)]:
+            integrator = AtmosphereIntegrator()
+            integrator.configure(A.from_turbidity(turbidity), A.wavelength_grid("rgb"), 60.0, 180.0,
+                                 SUN_ANGULAR_RADIUS_DEG, estimator=estimator)
+            directions = rng.normal(size=(count, 3))
+            directions[:, 2] = np.abs(directions[:, 2])
+            directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+            dr.kernel_history()                             # clears the history
+            integrator.render_directions(directions, seed=seed, spp=spp, batches=2).numpy()
+            # the path tracer's kernels: the large ones (the others sum and scatter the results)
+            hashes.append(sorted(k["hash"] for k in dr.kernel_history()
+                                 if k["type"] == dr.KernelType.JIT and k["operation_count"] > 500))
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    assert hashes[0], "no path kernel was launched"
+    assert all(h == hashes[0] for h in hashes[1:]), hashes

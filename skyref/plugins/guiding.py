@@ -40,6 +40,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from skyref.plugins.drjit_namespace import channel_mean
 from skyref.plugins.line_integral import GreyProxy
 
 __all__ = ["GUIDE_LAYERS", "GUIDE_ZENITH_BINS", "GUIDE_AZIMUTH_BINS", "GUIDE_FLOOR", "SingleScatteringGuide", "GuideAtVertex"]
@@ -116,7 +117,7 @@ class SingleScatteringGuide:
         light, _, _ = line.integrate(channels, p, d, h, length, self.sun_direction,
                                      GreyProxy(channels, channels.zeros() + 1.0))
         e_sun = sun.channel_irradiance(indices)
-        radiance = dr.mean(mi.ArrayXf([light[c] * e_sun[c] for c in range(len(indices))]), axis=0)
+        radiance = channel_mean(mi.ArrayXf([light[c] * e_sun[c] for c in range(len(indices))]))
         return radiance.numpy().astype(np.float64).reshape(layer.shape)
 
     def layer_altitudes(self) -> np.ndarray:

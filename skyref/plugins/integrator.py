@@ -98,7 +98,7 @@ from skyref.atmosphere import wavelength_grid
 from skyref.atmosphere.phase import henyey_greenstein_phase, sample_henyey_greenstein_cosine
 from skyref.atmosphere.sun import SUN_ANGULAR_RADIUS_DEG, SunDisk
 from skyref.errors import ParameterError
-from skyref.plugins.drjit_namespace import xp
+from skyref.plugins.drjit_namespace import channel_mean, xp
 from skyref.plugins.geometry import PlaneParallelSlab, SphericalShell
 from skyref.plugins.guiding import SingleScatteringGuide
 from skyref.plugins.line_integral import GreyProxy, LineIntegral
@@ -616,7 +616,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         si = self.objects.ray_intersect(mi.Ray3f(p, d, length))
         on_object = si.is_valid() & (si.t < length)
         normal = dr.select(dr.dot(si.n, d) > 0.0, -si.n, si.n)
-        albedo = dr.mean(mi.Spectrum(si.bsdf().eval_diffuse_reflectance(si, on_object)), axis=0)
+        albedo = channel_mean(mi.Spectrum(si.bsdf().eval_diffuse_reflectance(si, on_object)))
         length = dr.select(on_object, si.t, length)
         h_end = dr.select(on_object, geometry.altitude(p + length * d), h_end)
         return PathSegment(length, on_ground | on_object, h_end, on_object, normal, albedo)

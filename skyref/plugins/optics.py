@@ -33,7 +33,7 @@ import numpy as np
 from skyref.atmosphere import Atmosphere, preset
 from skyref.atmosphere.constituents import angstrom_extinction
 from skyref.atmosphere.spectra import DOBSON_UNIT_PER_M2, ConstantSpectrum
-from skyref.plugins.drjit_namespace import xp
+from skyref.plugins.drjit_namespace import channel_mean, xp
 
 __all__ = ["atmosphere_from_property", "ConstituentOptics", "AtmosphereOptics", "direction_with_cosine", "PathChannels"]
 
@@ -252,7 +252,7 @@ class AtmosphereOptics:
         if len(comps) < 2:
             return comps, [mi.Float(1.0)] * len(comps)
         inv = dr.rcp(dr.maximum(dr.detach(sigma_s), 1e-30))
-        return comps, [dr.mean(dr.detach(part) * inv, axis=0) for part in parts]
+        return comps, [channel_mean(dr.detach(part) * inv) for part in parts]
 
     def share_without_forward_peak(self, sigma_s_parts, sigma_s):
         """The share of the local scattering (mean over channels, detached, as the probabilities
