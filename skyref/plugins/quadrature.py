@@ -18,14 +18,10 @@ sorting is needed: the down crossings come in order of falling altitude, then th
 a level below the closest approach gives t* twice (a panel of length zero). A ray that only
 rises (from the ground, or with mu >= 0) needs only the up crossings.
 
-Each panel gets the same n-point Gauss–Legendre rule, exact for polynomials of degree 2n - 1;
-within a panel, the optical depth from the panel's start to each node uses the rule's
-cumulative (spectral integration) matrix, exact for degree n - 1.
-
-References
-----------
-L. Greengard, "Spectral integration and two-point boundary value problems", SIAM J. Numer. Anal.
-28(4) (1991) (the cumulative, spectral integration matrix).
+Each panel gets the same n-point Gauss–Legendre rule, exact for polynomials of degree 2n - 1,
+uniform in distance for optical depths (the densities are smooth within a panel) and, where a
+panel is optically thick, spaced in transmittance for the scattered light
+(:class:`~skyref.plugins.line_integral.PanelMap`).
 """
 
 from __future__ import annotations
@@ -59,23 +55,13 @@ def panel_levels(atmosphere, merge_fraction: float = 0.1) -> tuple:
 
 
 class GaussLegendreRule:
-    """The n-point Gauss–Legendre rule on [0, 1]: ``nodes``, ``weights`` and the cumulative
-    matrix, ``cumulative[j][m]`` = integral from 0 to nodes[j] of the m-th Lagrange basis
-    polynomial through the nodes (Python floats, so that they multiply any array type)."""
+    """The n-point Gauss–Legendre rule on [0, 1]: ``nodes`` and ``weights`` (Python floats, so
+    that they multiply any array type)."""
 
     def __init__(self, n: int):
         x, w = np.polynomial.legendre.leggauss(n)
-        nodes = 0.5 * (x + 1.0)
-        cumulative = np.zeros((n, n))
-        for m in range(n):
-            others = np.delete(nodes, m)
-            basis = np.polynomial.Polynomial.fromroots(others) / np.prod(nodes[m] - others)
-            antiderivative = basis.integ()
-            cumulative[:, m] = antiderivative(nodes) - antiderivative(0.0)
-        self.nodes = [float(u) for u in nodes]
+        self.nodes = [float(u) for u in 0.5 * (x + 1.0)]
         self.weights = [float(v) for v in 0.5 * w]
-        self.cumulative = cumulative.tolist()
-        self.count = n
 
 
 def level_crossings(r_mu, h, level, bottom_radius, xp):
