@@ -337,9 +337,10 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             self.geometry = PlaneParallelSlab(atmosphere.thickness_m, h0)
         self.sun = SunLight(direction_from_angles(sun_zenith_deg, sun_azimuth_deg),
                             SunDisk(sun_angular_radius_deg, bool(limb_darkening)), self.wavelengths_nm)
+        # a literal in the kernels (a new aerosol g compiles them again): an opaque copy, read
+        # inside the path's symbolic loop, broke forward-mode AD through it (Dr.Jit 1.5:
+        # "derivatives across an edge outside of the current dr.isolate_grad() scope")
         self.sun_lobe_g = self._sun_lobe_g(atmosphere)
-        # its kernel copy (opaque: a new aerosol g reuses the compiled kernels)
-        self._sun_lobe_g_kernel = dr.opaque(mi.Float, self.sun_lobe_g)
         #: Altitude over which one majorant of the delta tracking holds (the smallest scale height
         #: of an exponential profile; inf: the whole segment).
         self.majorant_drop = min((float(c.profile.scale_height_m) for c in atmosphere.constituents
@@ -806,8 +807,8 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         hazy air: guided with a fixed probability of 0.5, the variance of orders >= 3 on the hazy
         sky (turbidity 6) grew 4x."""
         optics, guide = self.optics, self.guide.at(self.geometry.up(point), altitude)
-        lobe = self.sun_lobe_g > 0.0
-        g = self._sun_lobe_g_kernel
+        g = self.sun_lobe_g
+        lobe = g > 0.0
         rayleigh_share = optics.share_without_forward_peak(parts, sigma_s)
         alpha = GUIDE_PROBABILITY * rayleigh_share
         beta = SUN_LOBE_PROBABILITY * (1.0 - rayleigh_share) if lobe else 0.0
