@@ -5,7 +5,7 @@ clear (sun zenith 60), hazy (turbidity 6, sun 60), sunset (sun 88), twilight (su
 Wavelength grids: RGB (680/550/440 nm), 17 wavelengths (380-780 nm / 25 nm), 48 (360-830 / 10).
 
 Estimators: the ``atmosphere`` integrator's ``delta_tracking`` (the baseline) and
-``line_integral`` (experimental), and stock Mitsuba ``volpath`` + skyref's ``atmosphere_medium``
+``line_integral``, and stock Mitsuba ``volpath`` + skyref's ``atmosphere_medium``
 (RGB only: in spectral variants volpath samples continuous wavelengths into film bands, another
 estimand). skyref's estimators look along the pixel centres, as the consumers of the ground truth
 do (the LUT audit and the Hosek training set); volpath samples the pixels' area (its noise is the

@@ -211,12 +211,18 @@ def render_sky(scene, spp: int | None = None, passes: int | None = None, seed: i
     pixels = rendered_pixels(scene)
     spp_per_pass = settings.spp // settings.passes
 
-    bar = None
+    bar, advance = None, None
     if progress:
         bar = tqdm(total=settings.passes * spp_per_pass, unit="spp", desc=f"render {scene.name or 'sky'}")
+        # Dr.Jit compiles a new configuration's path kernels in the first launch (the line
+        # integral's for up to ~2 min); they are cached on disk after that
+        bar.set_postfix_str("compiling the path kernels unless cached")
+
+        def advance(count):
+            bar.set_postfix_str("", refresh=False)
+            bar.update(count * settings.passes)
     start = time.perf_counter()
-    per_pass = renderer.passes(pixels, spp_per_pass, settings.passes, settings.seed,
-                               None if bar is None else (lambda count: bar.update(count * settings.passes)))
+    per_pass = renderer.passes(pixels, spp_per_pass, settings.passes, settings.seed, advance)
     elapsed = time.perf_counter() - start
     if bar is not None:
         bar.close()

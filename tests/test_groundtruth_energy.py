@@ -19,6 +19,8 @@ import math
 import numpy as np
 import pytest
 
+from skyref.scene import ESTIMATORS
+
 WL = np.array([680.0, 550.0, 440.0])
 Z_TOP = 60_000.0
 
@@ -44,12 +46,12 @@ def vertical_optical_depth():
     return rayleigh + aerosol
 
 
-def build(mi, atmosphere, sun_zenith, observer_m):
+def build(mi, atmosphere, sun_zenith, observer_m, estimator):
     from skyref.render import build_integrator
     from skyref.scene import Observer, RenderSettings, Scene, Sun
 
     scene = Scene(atmosphere=atmosphere, sun=Sun(sun_zenith, 180.0), observer=Observer(observer_m),
-                  wavelengths=list(WL), render=RenderSettings(max_depth=100_000))
+                  wavelengths=list(WL), render=RenderSettings(max_depth=100_000, estimator=estimator))
     return build_integrator(scene, geometry="plane_parallel")
 
 
@@ -81,33 +83,36 @@ def report(label, ratio, se):
     assert np.all(np.abs(z) < 4.0), f"{label}: energy not conserved: out/in {ratio} +- {se} (z {z})"
 
 
-def white_ground(mi, sun_zenith, n_mu, n_phi, spp, seeds):
+def white_ground(mi, sun_zenith, n_mu, n_phi, spp, seeds, estimator):
     from skyref.atmosphere import solar_irradiance
 
-    integ = build(mi, conservative_atmosphere(1.0), sun_zenith, Z_TOP)
+    integ = build(mi, conservative_atmosphere(1.0), sun_zenith, Z_TOP, estimator)
     flux, _ = hemisphere_flux(integ, n_mu, n_phi, upward=True, spp=spp, seeds=seeds)
     incident = math.cos(math.radians(sun_zenith)) * solar_irradiance(WL)
     ratio, se = mean_se(flux / incident)
-    report(f"white ground, sun {sun_zenith}", ratio, se)
+    report(f"white ground, sun {sun_zenith}, {estimator}", ratio, se)
 
 
-def test_white_ground_reflects_everything(mi):
+@pytest.mark.parametrize("estimator", ESTIMATORS)
+def test_white_ground_reflects_everything(mi, estimator):
     """Ground albedo 1, nothing absorbs: the upward flux at the top (observer at the top looking
     down, all orders, paths up to 100000 vertices) equals mu0 E. Sun at zenith 30 deg; 8 x 8
     directions x 32 seeds x 750 samples: rel. se 0.07-0.10% per wavelength (a 1% error is > 10
     sigma). Measured (integrator of commit 25098f3): out/in = 0.9985-1.0005 (|z| < 1.5); with
     128 seeds x 1500 samples 1.0002 +- 0.03%."""
-    white_ground(mi, 30.0, 8, 8, spp=750, seeds=range(32))
+    white_ground(mi, 30.0, 8, 8, spp=750, seeds=range(32), estimator=estimator)
 
 
 @pytest.mark.slow
-def test_white_ground_reflects_everything_low_sun(mi):
+@pytest.mark.parametrize("estimator", ESTIMATORS)
+def test_white_ground_reflects_everything_low_sun(mi, estimator):
     """As above with the sun at zenith 60 deg, 12 x 16 directions (quadrature error 1e-6 of the
     flux, measured on single scattering) x 32 seeds x 4000 samples: rel. se ~0.03%."""
-    white_ground(mi, 60.0, 12, 16, spp=4000, seeds=range(100, 132))
+    white_ground(mi, 60.0, 12, 16, spp=4000, seeds=range(100, 132), estimator=estimator)
 
 
-def test_black_ground_reflected_plus_transmitted_is_incident(mi):
+@pytest.mark.parametrize("estimator", ESTIMATORS)
+def test_black_ground_reflected_plus_transmitted_is_incident(mi, estimator):
     """Black ground, conservative air: reflected (upward at the top) + transmitted (diffuse
     downward at the ground + the direct beam mu0 E exp(-tau / mu0), tau in closed form) = mu0 E:
     the air absorbs nothing, so exactly what reaches the ground is lost. Sun at the zenith (the
@@ -119,9 +124,9 @@ def test_black_ground_reflected_plus_transmitted_is_incident(mi):
 
     atmosphere = conservative_atmosphere(0.0)
     incident = solar_irradiance(WL)                         # mu0 = 1
-    up = build(mi, atmosphere, 0.0, Z_TOP)
+    up = build(mi, atmosphere, 0.0, Z_TOP, estimator)
     reflected, _ = hemisphere_flux(up, 8, 4, upward=True, spp=400, seeds=range(32))
-    down = build(mi, atmosphere, 0.0, 0.0)
+    down = build(mi, atmosphere, 0.0, 0.0, estimator)
     transmitted, sun_at_nodes = hemisphere_flux(down, 24, 2, upward=False, spp=400, seeds=range(32))
     assert np.all(sun_at_nodes == 0.0)                      # no quadrature node inside the solar disk
     direct = np.exp(-vertical_optical_depth())
@@ -129,4 +134,4 @@ def test_black_ground_reflected_plus_transmitted_is_incident(mi):
     print("reflected", reflected.mean(0) / incident, "diffuse transmitted", transmitted.mean(0) / incident,
           "direct", direct)
     assert np.all(ratio < 1.0 + 4.0 * se), "more energy out than in"
-    report("black ground", ratio, se)
+    report(f"black ground, {estimator}", ratio, se)

@@ -80,7 +80,8 @@ def integ(mi):
 
     scene = Scene(atmosphere=preset("bruneton2017"), sun=Sun(30.0, 180.0), observer=Observer(1000.0),
                   wavelengths=WL)
-    return build_integrator(scene, geometry="spherical")
+    # the estimator whose derivatives are checked against finite differences (see below)
+    return build_integrator(scene, geometry="spherical", estimator="delta_tracking")
 
 
 def directions():

@@ -12,17 +12,20 @@ PLUGIN = {"type": "atmosphere", "atmosphere": "bruneton2017", "wavelengths": "rg
           "sun_zenith": 70.0, "sun_azimuth": 180.0}
 
 
-def test_mi_render_matches_render_orders(mi):
+@pytest.mark.parametrize("estimator", ESTIMATORS)
+def test_mi_render_matches_render_orders(mi, estimator):
     """Mean of the top row of an 8x4 equirectangular sky, 16 seeds each way: the two estimates
-    agree within 4 standard errors (relative standard error 0.25-0.35%: a 1.5% difference fails)."""
+    agree within 4 standard errors (relative standard error 0.25-0.35%: a 1.5% difference fails).
+    Through ``mi.render`` the line integral draws from Mitsuba's sampler (it had asked it for
+    ``next_3d``, which Mitsuba's samplers lack)."""
     from skyref.render import build_integrator, sensor_dict
 
     scene = Scene(atmosphere=A.bruneton2017(), sun=Sun(70.0, 180.0), camera=Camera(width=8, height=4))
     sensor = {**sensor_dict(scene.camera), "sampler": {"type": "independent", "sample_count": 4096}}
-    plugin_scene = mi.load_dict({"type": "scene", "integrator": PLUGIN, "sensor": sensor})
+    plugin_scene = mi.load_dict({"type": "scene", "integrator": {**PLUGIN, "estimator": estimator}, "sensor": sensor})
     # The top row (zenith 0-45 deg): the sun (zenith 70) and the ground stay out of it.
     plugin = np.array([mi.render(plugin_scene, seed=s).numpy()[0, :, :3].mean(axis=0) for s in range(16)])
-    integrator = build_integrator(scene)
+    integrator = build_integrator(scene, estimator=estimator)
     own_sensor = mi.load_dict(sensor_dict(scene.camera))
     own = np.array([integrator.render_orders(own_sensor, 1000 + s, 4096).numpy()[0].sum(axis=1).mean(axis=0)
                     for s in range(16)])
@@ -46,10 +49,13 @@ def test_parameters_in_traverse(mi):
 @pytest.mark.parametrize("estimator", ESTIMATORS)
 def test_new_sample_counts_reuse_the_compiled_path_kernels(mi, estimator):
     """Renders with other numbers of samples, directions, seeds and a new turbidity launch the
-    same kernels, by hash: nothing per launch is baked into the path tracer. (``dr.mean`` over a
-    path's channels baked the lane count in, so each round of an adaptive render compiled the
+    same kernels, by hash: nothing per launch is baked into the path tracer, and configuring
+    the integrator (the line integral's guide) launches the same kernels again. (``dr.mean`` over
+    a path's channels baked the lane count in, so each round of an adaptive render compiled the
     path tracer again: 3-24 s for the line integral; the sun lobe's probability baked the
-    turbidity in.)"""
+    turbidity in; the guide's cell directions, loaded from NumPy arrays, specialised its kernel
+    on their memory's alignment, which differs from run to run: a 17 s compile in most new
+    processes.)"""
     import drjit as dr
 
     from skyref.plugins.integrator import AtmosphereIntegrator
@@ -59,15 +65,16 @@ def test_new_sample_counts_reuse_the_compiled_path_kernels(mi, estimator):
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     try:
         for turbidity, count, spp, seed in [(2.0, 64, 2, 1), (2.0, 96, 3, 2), (4.0, 40, 5, 3)]:
-            integrator = AtmosphereIntegrator()
-            integrator.configure(A.from_turbidity(turbidity), A.wavelength_grid("rgb"), 60.0, 180.0,
-                                 SUN_ANGULAR_RADIUS_DEG, estimator=estimator)
             directions = rng.normal(size=(count, 3))
             directions[:, 2] = np.abs(directions[:, 2])
             directions /= np.linalg.norm(directions, axis=1, keepdims=True)
             dr.kernel_history()                             # clears the history
+            integrator = AtmosphereIntegrator()
+            integrator.configure(A.from_turbidity(turbidity), A.wavelength_grid("rgb"), 60.0, 180.0,
+                                 SUN_ANGULAR_RADIUS_DEG, estimator=estimator)
             integrator.render_directions(directions, seed=seed, spp=spp, batches=2).numpy()
-            # the path tracer's kernels: the large ones (the others sum and scatter the results)
+            # the guide's and the path tracer's kernels: the large ones (the others fill tables,
+            # sum and scatter the results)
             hashes.append(sorted(k["hash"] for k in dr.kernel_history()
                                  if k["type"] == dr.KernelType.JIT and k["operation_count"] > 500))
     finally:

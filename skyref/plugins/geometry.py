@@ -194,9 +194,11 @@ class PlaneParallelSlab:
         return False
 
     def shadow_interval(self, p, d, length, sun):
-        """A flat ground casts no shadow in the air (a sun below the horizon lights nothing:
-        its optical depth is infinite)."""
-        return self.grazing_interval(p, d, length, sun, 0.0)
+        """A flat ground casts no shadow in the air, but a sun at or below the horizon lights
+        nothing (its optical depth is infinite; the column above a point near the top over a
+        clamped cosine was not, and lit the thin air there): then the whole ray is in shadow."""
+        below = sun.z <= 0.0
+        return dr.select(below, 0.0, mi.Float(length)), mi.Float(length)
 
     def grazing_interval(self, p, d, length, sun, tangent_altitude):
         """Rays to the sun never pass below the point they leave from: no interval."""

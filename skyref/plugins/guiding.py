@@ -15,7 +15,7 @@ vertical plane), each cell's value at its centre, computed with the same quadrat
 segment's single scattering (:meth:`skyref.plugins.line_integral.LineIntegral.integrate`) at the
 grid wavelengths nearest 440, 550 and 680 nm (their mean, times the solar irradiance). A cell's
 probability is its L1 x solid angle plus ``GUIDE_FLOOR`` of the layer's mean, so that no
-direction is out of reach. Directions are drawn from the layer below or above the point's altitude
+direction is out of reach (a layer that no sunlight reaches is uniform). Directions are drawn from the layer below or above the point's altitude
 (stochastically, by where it lies between them), a cell by its probability, uniformly in cos theta
 and phi within the cell, phi's sign at random; the density of a direction (sr^-1) is the same
 mixture of the two layers' cells.
@@ -82,10 +82,13 @@ class SingleScatteringGuide:
         cos_edges = np.cos(zenith_edges)
         #: solid angle of one cell of each zenith bin (one side of the sun's plane), sr
         cell_solid_angle = (cos_edges[:-1] - cos_edges[1:]) * self.azimuth_step
-        radiance = self._single_scattering(line, geometry, sun, wavelengths_nm, zenith_edges)
+        radiance = self._single_scattering(line, geometry, sun, wavelengths_nm)
         mass = np.maximum(radiance, 0.0) * cell_solid_angle[None, :, None]
         layer_mass = mass.sum(axis=(1, 2), keepdims=True)
         mass = mass + GUIDE_FLOOR * layer_mass * cell_solid_angle[None, :, None] / (2.0 * math.pi)
+        # a layer that no sunlight reaches (the sun far below the horizon, an empty atmosphere):
+        # uniform in solid angle
+        mass = np.where(layer_mass > 0.0, mass, cell_solid_angle[None, :, None])
         probability = (mass / mass.sum(axis=(1, 2), keepdims=True)).reshape(GUIDE_LAYERS, -1)
         cumulative = np.cumsum(probability, axis=1)
         cumulative[:, -1] = 1.0
@@ -94,20 +97,22 @@ class SingleScatteringGuide:
         self.cos_edges = mi.Float(cos_edges.astype(np.float32))
         self.cell_solid_angle = mi.Float(cell_solid_angle.astype(np.float32))
 
-    def _single_scattering(self, line, geometry, sun, wavelengths_nm, zenith_edges):
+    def _single_scattering(self, line, geometry, sun, wavelengths_nm):
         """L1 at the centres of the cells, (layers, zenith bins, azimuth bins), per unit
         radiance of the grid's mean (W m^-2 sr^-1 nm^-1 up to one constant factor)."""
-        layer, j, k = np.meshgrid(np.arange(GUIDE_LAYERS), np.arange(GUIDE_ZENITH_BINS),
-                                  np.arange(GUIDE_AZIMUTH_BINS), indexing="ij")
-        theta = 0.5 * (zenith_edges[j] + zenith_edges[j + 1])
-        phi = (k + 0.5) * self.azimuth_step
-        altitude = self.layer_altitudes()[layer]
+        # The cells' centres are computed in the kernel from the cell index: arrays loaded from
+        # NumPy would specialise the kernel on their memory's alignment (Dr.Jit 1.5), which
+        # varies from run to run, and this kernel takes ~17 s to compile.
+        cell = dr.arange(mi.UInt32, GUIDE_LAYERS * self.cells)
+        layer = cell // self.cells
+        theta = (mi.Float((cell // GUIDE_AZIMUTH_BINS) % GUIDE_ZENITH_BINS) + 0.5) * (math.pi / GUIDE_ZENITH_BINS)
+        phi = (mi.Float(cell % GUIDE_AZIMUTH_BINS) + 0.5) * self.azimuth_step
+        altitude = self.top * dr.square(mi.Float(layer) / (GUIDE_LAYERS - 1))     # h_i = H (i / (n - 1))^2
         up = mi.Vector3f(0.0, 0.0, 1.0)                         # the observer's vertical
         towards_sun, across = _sun_frame(up, self.sun_direction)
-        sin_theta, cos_theta = mi.Float(np.sin(theta).ravel()), mi.Float(np.cos(theta).ravel())
-        d = (sin_theta * mi.Float(np.cos(phi).ravel())) * towards_sun \
-            + (sin_theta * mi.Float(np.sin(phi).ravel())) * across + cos_theta * up
-        p = mi.Point3f(0.0, 0.0, mi.Float(altitude.ravel().astype(np.float32)) - geometry.h0)
+        (sin_theta, cos_theta), (sin_phi, cos_phi) = dr.sincos(theta), dr.sincos(phi)
+        d = (sin_theta * cos_phi) * towards_sun + (sin_theta * sin_phi) * across + cos_theta * up
+        p = mi.Point3f(0.0, 0.0, altitude - geometry.h0)
         h = geometry.altitude(p)
         length = dr.minimum(geometry.distance_to_ground(p, d, h), geometry.distance_to_top(p, d, h))
         wavelengths_nm = np.asarray(wavelengths_nm)
@@ -118,11 +123,7 @@ class SingleScatteringGuide:
                                      GreyProxy(channels, channels.zeros() + 1.0))
         e_sun = sun.channel_irradiance(indices)
         radiance = channel_mean(mi.ArrayXf([light[c] * e_sun[c] for c in range(len(indices))]))
-        return radiance.numpy().astype(np.float64).reshape(layer.shape)
-
-    def layer_altitudes(self) -> np.ndarray:
-        """The layers' altitudes h_i = H (i / (n - 1))^2, m."""
-        return self.top * (np.arange(GUIDE_LAYERS) / (GUIDE_LAYERS - 1)) ** 2
+        return radiance.numpy().astype(np.float64).reshape(GUIDE_LAYERS, GUIDE_ZENITH_BINS, GUIDE_AZIMUTH_BINS)
 
     def at(self, up, altitude) -> "GuideAtVertex":
         """The guide at scattering vertices with local zenith ``up`` and ``altitude`` (m): the
