@@ -48,14 +48,16 @@ def test_parameters_in_traverse(mi):
 
 @pytest.mark.parametrize("estimator", ESTIMATORS)
 def test_new_sample_counts_reuse_the_compiled_path_kernels(mi, estimator):
-    """Renders with other numbers of samples, directions, seeds and a new turbidity launch the
-    same kernels, by hash: nothing per launch is baked into the path tracer, and configuring
-    the integrator (the line integral's guide) launches the same kernels again. (``dr.mean`` over
-    a path's channels baked the lane count in, so each round of an adaptive render compiled the
-    path tracer again: 3-24 s for the line integral; the sun lobe's probability baked the
+    """Renders with other numbers of samples, directions, seeds, a new turbidity and a new
+    observer altitude launch the same kernels, by hash: nothing per launch is baked into the
+    path tracer, and configuring the integrator (the line integral's guide) launches the same
+    kernels again. (``dr.mean`` over a path's channels baked the lane count in, so each round of
+    an adaptive render compiled the path tracer again: 3-24 s for the line integral; the sun
+    lobe's probability baked the
     turbidity in; the guide's cell directions, loaded from NumPy arrays, specialised its kernel
     on their memory's alignment, which differs from run to run: a 17 s compile in most new
-    processes.)"""
+    processes; the observer's altitude, a literal in the guide's kernel, compiled it again for
+    each observer.)"""
     import drjit as dr
 
     from skyref.plugins.integrator import AtmosphereIntegrator
@@ -64,14 +66,15 @@ def test_new_sample_counts_reuse_the_compiled_path_kernels(mi, estimator):
     hashes = []
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     try:
-        for turbidity, count, spp, seed in [(2.0, 64, 2, 1), (2.0, 96, 3, 2), (4.0, 40, 5, 3)]:
+        for turbidity, count, spp, seed, observer_m in [(2.0, 64, 2, 1, 1.0), (2.0, 96, 3, 2, 1.0),
+                                                        (4.0, 40, 5, 3, 500.0)]:
             directions = rng.normal(size=(count, 3))
             directions[:, 2] = np.abs(directions[:, 2])
             directions /= np.linalg.norm(directions, axis=1, keepdims=True)
             dr.kernel_history()                             # clears the history
             integrator = AtmosphereIntegrator()
             integrator.configure(A.from_turbidity(turbidity), A.wavelength_grid("rgb"), 60.0, 180.0,
-                                 SUN_ANGULAR_RADIUS_DEG, estimator=estimator)
+                                 SUN_ANGULAR_RADIUS_DEG, observer_altitude_m=observer_m, estimator=estimator)
             integrator.render_directions(directions, seed=seed, spp=spp, batches=2).numpy()
             # the guide's and the path tracer's kernels: the large ones (the others fill tables,
             # sum and scatter the results)

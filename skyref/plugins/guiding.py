@@ -112,7 +112,8 @@ class SingleScatteringGuide:
         towards_sun, across = _sun_frame(up, self.sun_direction)
         (sin_theta, cos_theta), (sin_phi, cos_phi) = dr.sincos(theta), dr.sincos(phi)
         d = (sin_theta * cos_phi) * towards_sun + (sin_theta * sin_phi) * across + cos_theta * up
-        p = mi.Point3f(0.0, 0.0, altitude - geometry.h0)
+        # the observer's altitude opaque: one kernel for every observer
+        p = mi.Point3f(0.0, 0.0, altitude - dr.opaque(mi.Float, geometry.h0))
         h = geometry.altitude(p)
         length = dr.minimum(geometry.distance_to_ground(p, d, h), geometry.distance_to_top(p, d, h))
         wavelengths_nm = np.asarray(wavelengths_nm)
