@@ -53,11 +53,10 @@ def test_new_sample_counts_reuse_the_compiled_path_kernels(mi, estimator):
     path tracer, and configuring the integrator (the line integral's guide) launches the same
     kernels again. (``dr.mean`` over a path's channels baked the lane count in, so each round of
     an adaptive render compiled the path tracer again: 3-24 s for the line integral; the sun
-    lobe's probability baked the
-    turbidity in; the guide's cell directions, loaded from NumPy arrays, specialised its kernel
-    on their memory's alignment, which differs from run to run: a 17 s compile in most new
-    processes; the observer's altitude, a literal in the guide's kernel, compiled it again for
-    each observer.)"""
+    lobe's probability baked the turbidity in; the guide's cell directions, loaded from NumPy
+    arrays, specialised its kernel on their memory's alignment, which differs from run to run: a
+    17 s compile in most new processes; the observer's altitude, a literal in the guide's kernel,
+    compiled it again for each observer.)"""
     import drjit as dr
 
     from skyref.plugins.integrator import AtmosphereIntegrator

@@ -51,12 +51,17 @@ class SphericalShell:
         # Kernel copies are opaque: a new observer altitude reuses the compiled kernels.
         self._centre = dr.opaque(mi.Float, self.centre_distance)
         self._offset = dr.opaque(mi.Float, self.altitude_offset)
+        self._h0 = dr.opaque(mi.Float, self.h0)
 
     def altitude(self, p: mi.Point3f) -> mi.Float:
         """Altitude above the ground of point ``p``, m (cancellation-free)."""
         q = dr.squared_norm(p) + (2.0 * self._centre) * p.z + self._offset
         r = dr.sqrt(dr.maximum(dr.squared_norm(mi.Vector3f(p.x, p.y, p.z + self._centre)), 0.0))
         return q / (r + self.R)
+
+    def above_observer(self, altitude) -> mi.Point3f:
+        """The point at ``altitude`` (m) on the observer's vertical."""
+        return mi.Point3f(0.0, 0.0, altitude - self._h0)
 
     def up(self, p: mi.Point3f) -> mi.Vector3f:
         """Local zenith (outward normal of the ground sphere through ``p``)."""
@@ -168,6 +173,10 @@ class PlaneParallelSlab:
 
     def altitude(self, p):
         return p.z + self._h0
+
+    def above_observer(self, altitude) -> mi.Point3f:
+        """The point at ``altitude`` (m) on the observer's vertical."""
+        return mi.Point3f(0.0, 0.0, altitude - self._h0)
 
     def up(self, p):
         return mi.Vector3f(0.0, 0.0, 1.0) + 0.0 * p

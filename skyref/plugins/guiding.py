@@ -15,10 +15,10 @@ vertical plane), each cell's value at its centre, computed with the same quadrat
 segment's single scattering (:meth:`skyref.plugins.line_integral.LineIntegral.integrate`) at the
 grid wavelengths nearest 440, 550 and 680 nm (their mean, times the solar irradiance). A cell's
 probability is its L1 x solid angle plus ``GUIDE_FLOOR`` of the layer's mean, so that no
-direction is out of reach (a layer that no sunlight reaches is uniform). Directions are drawn from the layer below or above the point's altitude
-(stochastically, by where it lies between them), a cell by its probability, uniformly in cos theta
-and phi within the cell, phi's sign at random; the density of a direction (sr^-1) is the same
-mixture of the two layers' cells.
+direction is out of reach (a layer that no sunlight reaches is uniform). Directions are drawn
+from the layer below or above the point's altitude (stochastically, by where it lies between
+them), a cell by its probability, uniformly in cos theta and phi within the cell, phi's sign at
+random; the density of a direction (sr^-1) is the same mixture of the two layers' cells.
 
 At a point elsewhere than above the observer, the guide is read in the local frame (local zenith,
 the sun's local azimuth): the sun's elevation there differs, and the guide is then only an
@@ -112,8 +112,7 @@ class SingleScatteringGuide:
         towards_sun, across = _sun_frame(up, self.sun_direction)
         (sin_theta, cos_theta), (sin_phi, cos_phi) = dr.sincos(theta), dr.sincos(phi)
         d = (sin_theta * cos_phi) * towards_sun + (sin_theta * sin_phi) * across + cos_theta * up
-        # the observer's altitude opaque: one kernel for every observer
-        p = mi.Point3f(0.0, 0.0, altitude - dr.opaque(mi.Float, geometry.h0))
+        p = geometry.above_observer(altitude)
         h = geometry.altitude(p)
         length = dr.minimum(geometry.distance_to_ground(p, d, h), geometry.distance_to_top(p, d, h))
         wavelengths_nm = np.asarray(wavelengths_nm)
