@@ -14,23 +14,24 @@ PLUGIN = {"type": "atmosphere", "atmosphere": "bruneton2017", "wavelengths": "rg
 
 @pytest.mark.parametrize("estimator", ESTIMATORS)
 def test_mi_render_matches_render_orders(mi, estimator):
-    """Mean of the top row of an 8x4 equirectangular sky, 16 seeds each way: the two estimates
-    agree within 4 standard errors (relative standard error 0.25-0.35%: a 1.5% difference fails).
+    """Mean of the top row of an 8x4 equirectangular sky, 32 seeds each way: the two estimates
+    agree within 4 standard errors, asserted below 0.25% of the radiance (a 1% difference fails).
     Through ``mi.render`` the line integral draws from Mitsuba's sampler (it had asked it for
     ``next_3d``, which Mitsuba's samplers lack)."""
     from skyref.render import build_integrator, sensor_dict
 
+    seeds = 32
     scene = Scene(atmosphere=A.bruneton2017(), sun=Sun(70.0, 180.0), camera=Camera(width=8, height=4))
     sensor = {**sensor_dict(scene.camera), "sampler": {"type": "independent", "sample_count": 4096}}
     plugin_scene = mi.load_dict({"type": "scene", "integrator": {**PLUGIN, "estimator": estimator}, "sensor": sensor})
     # The top row (zenith 0-45 deg): the sun (zenith 70) and the ground stay out of it.
-    plugin = np.array([mi.render(plugin_scene, seed=s).numpy()[0, :, :3].mean(axis=0) for s in range(16)])
+    plugin = np.array([mi.render(plugin_scene, seed=s).numpy()[0, :, :3].mean(axis=0) for s in range(seeds)])
     integrator = build_integrator(scene, estimator=estimator)
     own_sensor = mi.load_dict(sensor_dict(scene.camera))
     own = np.array([integrator.render_orders(own_sensor, 1000 + s, 4096).numpy()[0].sum(axis=1).mean(axis=0)
-                    for s in range(16)])
-    se = np.sqrt(plugin.var(0, ddof=1) / 16 + own.var(0, ddof=1) / 16)
-    assert np.all(se / own.mean(0) < 0.005)
+                    for s in range(seeds)])
+    se = np.sqrt(plugin.var(0, ddof=1) / seeds + own.var(0, ddof=1) / seeds)
+    assert np.all(se / own.mean(0) < 0.0025), se / own.mean(0)
     assert np.all(np.abs(plugin.mean(0) - own.mean(0)) < 4 * se)
 
 
