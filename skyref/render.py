@@ -73,7 +73,11 @@ def build_integrator(scene, geometry: str = "spherical", wavelengths_per_path: i
 
     from skyref.plugins.integrator import AtmosphereIntegrator
 
-    integrator = AtmosphereIntegrator(mi.Properties())
+    # constructed with the cheaper estimator's defaults (the line integral's would build a sun
+    # table and a guide for a default sky), then configured for the scene
+    properties = mi.Properties()
+    properties["estimator"] = "delta_tracking"
+    integrator = AtmosphereIntegrator(properties)
     integrator.configure(scene.atmosphere, scene.wavelengths_nm, scene.sun.zenith_deg, scene.sun.azimuth_deg,
                          scene.sun.angular_radius_deg, scene.sun.limb_darkening, scene.observer.altitude_m,
                          geometry=geometry, max_depth=scene.render.max_depth,

@@ -180,12 +180,13 @@ class Camera:
 
 PIXEL_SAMPLING = ("area", "centre")
 #: The ``atmosphere`` integrator's estimators (:mod:`skyref.plugins.integrator`), independent of each
-#: other: ``delta_tracking`` (spectral tracking with next-event estimation at every candidate
-#: point, the baseline) and ``line_integral`` (single scattering by quadrature along the camera
-#: ray, forced collisions; several times more efficient on pixel centres, see
-#: ``results/groundtruth_speed.md``, but its kernels take tens of seconds to compile).
+#: other: ``line_integral`` (the default: single scattering by quadrature along the camera ray,
+#: forced collisions; 3-40x less CPU to a given error, see ``results/groundtruth_speed.md``, but
+#: its kernels take 15-120 s to compile for each new configuration, then come from Dr.Jit's disk
+#: cache) and ``delta_tracking`` (spectral tracking with next-event estimation at every candidate
+#: point: the baseline, and the default before 2026-12-03).
 ESTIMATORS = ("delta_tracking", "line_integral")
-DEFAULT_ESTIMATOR = "delta_tracking"
+DEFAULT_ESTIMATOR = "line_integral"
 RENDER_REGIONS = ("all", "above_horizon")
 
 
@@ -225,14 +226,13 @@ class RenderSettings:
         object.__setattr__(self, "polarized", bool(self.polarized))
 
     def to_dict(self) -> dict:
-        """The settings as a TOML table; ``polarized`` only when true and ``estimator`` only when
-        not the default, so that a scene that uses neither is written (in image headers, cache
-        keys, batch fingerprints) as before they existed."""
+        """The settings as a TOML table; ``polarized`` only when true, so that a scalar scene is
+        written (in image headers, cache keys, batch fingerprints) as before it existed. The
+        estimator is always written: a scene written without it was rendered with delta
+        tracking (the default until 2026-12-03), and must not match one of today's default."""
         data = dataclasses.asdict(self)
         if not self.polarized:
             del data["polarized"]
-        if self.estimator == DEFAULT_ESTIMATOR:
-            del data["estimator"]
         return data
 
     @classmethod

@@ -1,6 +1,12 @@
-"""Shared fixtures: Mitsuba loaded once, in the CPU RGB variant, with skyref's plugins."""
+"""Shared fixtures: Mitsuba loaded once, in the CPU RGB variant, with skyref's plugins; the default
+scene file rendered by the baseline estimator."""
+
+import dataclasses
+from pathlib import Path
 
 import pytest
+
+EARTH_CLEAR = Path(__file__).resolve().parent.parent / "scenes" / "earth-clear.toml"
 
 
 @pytest.fixture(scope="session")
@@ -8,3 +14,17 @@ def mi():
     from skyref.plugins import load_mitsuba
 
     return load_mitsuba("llvm_ad_rgb")
+
+
+@pytest.fixture(scope="session")
+def earth_clear_baseline(tmp_path_factory) -> Path:
+    """``scenes/earth-clear.toml`` with ``render.estimator = "delta_tracking"``, for tests whose
+    subject is not the estimator (batches, the dataset): the baseline's kernels compile in
+    seconds, the default line integral's in about 2 minutes at this scene's 48 wavelengths, and
+    each of these tests renders in fresh processes. The estimators are tested apart, both of them."""
+    from skyref.scene import load_scene, save_scene
+
+    scene = load_scene(EARTH_CLEAR)
+    path = tmp_path_factory.mktemp("scenes") / "earth-clear.toml"
+    save_scene(scene.replace(render=dataclasses.replace(scene.render, estimator="delta_tracking")), path)
+    return path

@@ -5,7 +5,7 @@ import pytest
 
 from skyref.errors import ParameterError
 from skyref.render import PixelPool, pixel_relative_error, render_sky, render_to_error
-from skyref.scene import Camera, RenderSettings, Scene, Sun
+from skyref.scene import ESTIMATORS, Camera, RenderSettings, Scene, Sun
 
 
 def test_pixel_pool_weights_each_pixel_by_its_own_samples():
@@ -24,19 +24,26 @@ def test_pixel_relative_error_is_the_worst_wavelength():
     assert pixel_relative_error(radiance, error).tolist() == [0.1, 0.0, np.inf]
 
 
-def test_render_to_error_reaches_the_target_in_every_direction_with_honest_error_bars(mi):
+#: Per estimator, a target that takes more than the first round (16 x 16 samples) in some pixels
+#: and fewer than the most in others: the line integral reached 1.5% everywhere in the first round.
+ADAPTIVE_TARGETS = {"delta_tracking": 0.015, "line_integral": 0.004}
+
+
+@pytest.mark.parametrize("estimator", ESTIMATORS)
+def test_render_to_error_reaches_the_target_in_every_direction_with_honest_error_bars(mi, estimator):
     """Every pixel, the dark ground below the horizon included, reaches the target in its worst
     channel; pixels get different sample counts; the radiance agrees with an independent
     high-sample render within the stated standard errors, value by value (mean z^2) and all
     together: a 1% bias would shift each z by ~0.6 and the mean z of the 144 values by ~7
-    standard deviations."""
+    standard deviations at delta tracking's 1.5% target, more at the line integral's 0.4%."""
     # Pixel centres (zenith 15, 45, ... deg; azimuth 22.5, 67.5, ... deg) miss the solar disk, whose
     # hit-or-miss share of an area-sampled pixel no target of this size can resolve.
+    target = ADAPTIVE_TARGETS[estimator]
     scene = Scene(sun=Sun(zenith_deg=40.0), camera=Camera(width=8, height=6), wavelengths="rgb",
-                  render=RenderSettings(passes=16, pixel_sampling="centre"))
-    sky = render_to_error(scene, 0.015, seeds=list(range(11, 19)), max_spp=65536)
+                  render=RenderSettings(passes=16, pixel_sampling="centre", estimator=estimator))
+    sky = render_to_error(scene, target, seeds=list(range(11, 19)), max_spp=65536)
     worst = pixel_relative_error(sky.radiance, sky.standard_error)
-    assert sky.metadata["pixels_at_target"] == 1.0 and np.all(worst <= 0.015), worst.max()
+    assert sky.metadata["pixels_at_target"] == 1.0 and np.all(worst <= target), worst.max()
     low, high = sky.metadata["spp_range"]
     assert 256 <= low < high <= 65536 and len(sky.metadata["seed"]) >= 2   # 256: the first round's 16 x 16
     reference = render_sky(scene, spp=65536, passes=16, seed=99)

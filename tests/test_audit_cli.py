@@ -20,6 +20,7 @@ height = 8
 wavelengths = [680.0, 550.0, 440.0]
 [render]
 passes = 4
+estimator = "delta_tracking"    # the audit is the subject: the baseline's kernels compile in seconds
 """
 SMALL = ["r_size=4", "mu_size=16", "mu_s_size=4", "nu_size=2", "scattering_orders=2",
          "transmittance_width=32", "transmittance_height=8", "irradiance_width=16", "irradiance_height=4"]

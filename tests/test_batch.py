@@ -15,12 +15,16 @@ from skyref.batch.grid import MAX_ROUNDS, load_grid
 from skyref.errors import ParameterError
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-SCENE = os.path.join(ROOT, "scenes", "earth-clear.toml")
 
 
-def write_grid(path, axes: str, output: str):
-    path.write_text(f'[base]\nscene = "{SCENE}"\n[axes]\n{axes}\n[output]\n{output}\n')
-    return str(path)
+@pytest.fixture
+def write_grid(earth_clear_baseline):
+    """Writes a grid file over scenes/earth-clear.toml rendered by the baseline estimator (the
+    batch machinery is the subject here, not the estimator; conftest.earth_clear_baseline)."""
+    def write(path, axes: str, output: str):
+        path.write_text(f'[base]\nscene = "{earth_clear_baseline}"\n[axes]\n{axes}\n[output]\n{output}\n')
+        return str(path)
+    return write
 
 
 GOOD_AXES = '"sun.zenith_deg" = [20.0, 60.0, 85.0]\n"atmosphere.ground_albedo" = [0.0, 0.5]'
@@ -40,7 +44,7 @@ GOOD_OUTPUT = 'directory = "out"\nwidth = 12\nheight = 6\nspp = 8\npasses = 2'
     (GOOD_AXES, 'directory = "out"\nspp = 8\nformat = "hdr"', "output.format"),
     (GOOD_AXES, 'directory = "out"\nspp = 8\ncolour = 1', "output.colour"),
 ])
-def test_bad_grid_is_rejected_naming_the_entry(tmp_path, axes, output, name):
+def test_bad_grid_is_rejected_naming_the_entry(write_grid, tmp_path, axes, output, name):
     with pytest.raises(ParameterError) as info:
         grid = load_grid(write_grid(tmp_path / "grid.toml", axes, output))
         grid.validate()
@@ -48,7 +52,7 @@ def test_bad_grid_is_rejected_naming_the_entry(tmp_path, axes, output, name):
     assert not (tmp_path / "out").exists()
 
 
-def test_unwritable_output_is_rejected_before_rendering(tmp_path, monkeypatch):
+def test_unwritable_output_is_rejected_before_rendering(write_grid, tmp_path, monkeypatch):
     import skyref.batch.run as batch_run
     from skyref.batch import run_batch
 
@@ -64,14 +68,14 @@ def test_unwritable_output_is_rejected_before_rendering(tmp_path, monkeypatch):
     assert info.value.name == "output.directory"
 
 
-def test_cli_reports_bad_grid_in_one_line(tmp_path):
+def test_cli_reports_bad_grid_in_one_line(write_grid, tmp_path):
     from skyref.cli import main
 
     path = write_grid(tmp_path / "grid.toml", '"sun.zenith_deg" = [10.0, 200.0]', GOOD_OUTPUT)
     assert main(["batch", path, "-q"]) == 2
 
 
-def test_seeds_are_distinct_across_skies_rounds_and_base_seeds(tmp_path):
+def test_seeds_are_distinct_across_skies_rounds_and_base_seeds(write_grid, tmp_path):
     seen = set()
     for base_seed in (0, 1, 2):
         grid = load_grid(write_grid(tmp_path / "grid.toml", GOOD_AXES, GOOD_OUTPUT + f"\nseed = {base_seed}"))
@@ -84,7 +88,7 @@ def test_seeds_are_distinct_across_skies_rounds_and_base_seeds(tmp_path):
     assert [again.sky(i) for i in range(len(again))] == [grid.sky(i) for i in range(len(grid))]
 
 
-def test_axis_values_reach_the_scene(tmp_path):
+def test_axis_values_reach_the_scene(write_grid, tmp_path):
     from skyref.scene import Scene
 
     grid = load_grid(write_grid(tmp_path / "grid.toml", GOOD_AXES + '\n"atmosphere.turbidity" = [2.0, 6.0]',
@@ -110,7 +114,7 @@ def _markers(directory):
     return sorted(n for n in os.listdir(folder) if not n.startswith(".")) if os.path.isdir(folder) else []
 
 
-def test_kill_9_then_resume_equals_an_uninterrupted_run(tmp_path):
+def test_kill_9_then_resume_equals_an_uninterrupted_run(write_grid, tmp_path):
     """Kill a running batch with SIGKILL once some skies are finished, rerun it, and compare
     with a run that was never interrupted: every sky once, complete, identical."""
     import xarray as xr
@@ -165,7 +169,7 @@ def test_kill_9_then_resume_equals_an_uninterrupted_run(tmp_path):
     assert np.all(np.isfinite(killed_data.radiance.values))  # every sky was written
 
 
-def test_a_directory_holding_another_grid_is_refused(tmp_path):
+def test_a_directory_holding_another_grid_is_refused(write_grid, tmp_path):
     from skyref.batch import run_batch
     from skyref.batch.store import BatchStore
 
@@ -177,7 +181,7 @@ def test_a_directory_holding_another_grid_is_refused(tmp_path):
         run_batch(other, workers=1, progress=False)
 
 
-def test_rgb_dataset_holds_the_colorimetric_rgb_of_each_exr(tmp_path):
+def test_rgb_dataset_holds_the_colorimetric_rgb_of_each_exr(write_grid, tmp_path):
     import xarray as xr
 
     from skyref.batch import run_batch
@@ -195,7 +199,7 @@ def test_rgb_dataset_holds_the_colorimetric_rgb_of_each_exr(tmp_path):
         assert data.spp.values[i] == marker["spp"] == 8
 
 
-def test_runs_on_a_given_dask_scheduler(tmp_path):
+def test_runs_on_a_given_dask_scheduler(write_grid, tmp_path):
     """--scheduler: the same grid on an external dask cluster gives the same skies."""
     from dask.distributed import LocalCluster
 
@@ -216,7 +220,7 @@ def test_runs_on_a_given_dask_scheduler(tmp_path):
         np.testing.assert_array_equal(a.radiance, b.radiance)
 
 
-def test_part_of_a_grid_renders_those_skies_as_the_whole_grid_would(tmp_path):
+def test_part_of_a_grid_renders_those_skies_as_the_whole_grid_would(write_grid, tmp_path):
     """run_batch(indices=...): only those skies, with the whole grid's ids and seeds (the same
     EXRs as a run of the whole grid); a number outside the grid is refused naming ``indices``
     before anything is written."""

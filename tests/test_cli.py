@@ -163,6 +163,7 @@ def test_render_writes_exr_and_png(tmp_path, capsys):
     assert sky.radiance.shape == (8, 16, 3) and np.all(np.isfinite(sky.radiance))
     assert (tmp_path / "sky.png").stat().st_size > 0
     assert "median relative standard error" in capsys.readouterr().out
+    assert sky.metadata["estimator"] == "line_integral"          # the default
 
 
 def test_render_takes_the_estimator_from_the_scene_or_the_command_line(tmp_path, capsys):
@@ -171,8 +172,8 @@ def test_render_takes_the_estimator_from_the_scene_or_the_command_line(tmp_path,
     from skyref.io.exr import read_sky_exr
 
     scene = write(tmp_path, '[camera]\nwidth = 8\nheight = 4\n[render]\nspp = 8\npasses = 2\n'
-                            'pixel_sampling = "centre"\nestimator = "line_integral"\n')
-    for extra, expected in (([], "line_integral"), (["--estimator", "delta_tracking"], "delta_tracking")):
+                            'pixel_sampling = "centre"\nestimator = "delta_tracking"\n')
+    for extra, expected in (([], "delta_tracking"), (["--estimator", "line_integral"], "line_integral")):
         exr = tmp_path / f"{expected}.exr"
         assert main(["render", str(scene), "-o", str(exr), "-q", *extra]) == 0
         sky = read_sky_exr(exr)

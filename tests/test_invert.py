@@ -2,7 +2,8 @@
 differences, a synthetic round trip, the identifiability flag, and the CLI.
 
 Tiny images and budgets keep the file under two minutes on two CPU cores; results/inversion.md
-(benchmarks/inversion.py) measures bias, spread and coverage over many cases.
+(benchmarks/inversion.py) measures bias, spread and coverage over many cases. The synthetic
+skies are rendered by the estimator the inversion's forward model uses, delta tracking.
 """
 
 import dataclasses
@@ -40,7 +41,7 @@ def truth_sky(mi, base):
     truth = ParameterSet(base, values=TRUTH)
     scene = Scene(atmosphere=truth.atmosphere_at(truth.values), sun=Sun(40.0, 120.0),
                   camera=Camera("equirectangular", 32, 16), wavelengths=WL,
-                  render=RenderSettings(spp=2048, passes=4, seed=7))
+                  render=RenderSettings(spp=2048, passes=4, seed=7, estimator="delta_tracking"))
     return render_sky(scene, variant=VARIANT)
 
 
@@ -219,7 +220,8 @@ def test_sun_estimated_from_the_visible_disk(mi, base):
 
     zenith, azimuth = 3.5 * 11.25, 10.5 * 11.25
     sky = render_sky(Scene(atmosphere=base, sun=Sun(zenith, azimuth), camera=Camera("equirectangular", 32, 16),
-                           wavelengths=WL, render=RenderSettings(spp=32, passes=2, pixel_sampling="centre")),
+                           wavelengths=WL, render=RenderSettings(spp=32, passes=2, pixel_sampling="centre",
+                                                                        estimator="delta_tracking")),
                      variant=VARIANT)
     sun = estimate_sun(image_from_sky(sky), sky.directions)
     assert abs(sun.zenith_deg - zenith) < 5.7 and abs(sun.azimuth_deg - azimuth) < 5.7
@@ -238,7 +240,8 @@ def test_ozone_from_an_rgb_noon_sky_is_flagged(mi, base):
 
     truth = ParameterSet(base, values=dict(aod_550=0.15, angstrom_alpha=1.0, aerosol_g=0.75, ozone_du=300.0))
     scene = Scene(atmosphere=truth.atmosphere_at(truth.values), sun=Sun(20.0, 180.0), camera=Camera("fisheye", 24, 24),
-                  wavelengths=RGB_MODEL_WAVELENGTHS_NM, render=RenderSettings(spp=512, passes=4, seed=3))
+                  wavelengths=RGB_MODEL_WAVELENGTHS_NM,
+                  render=RenderSettings(spp=512, passes=4, seed=3, estimator="delta_tracking"))
     obs = observation(image_from_sky(render_sky(scene, variant=VARIANT), "rgb"), atmosphere=base)
     assert obs.channels == "xyz"
     settings = InversionSettings(pixels=150, spp_max=256, final_spp=1024, map_spp=16, max_iterations=4,
@@ -313,7 +316,8 @@ def test_skyrefs_own_default_render_inverts(mi, tmp_path, capsys):
 
     scene = load_scene(os.path.join(os.path.dirname(__file__), "..", "scenes", "earth-clear.toml"))
     small = tmp_path / "earth-clear.toml"
-    save_scene(scene.replace(camera=dataclasses.replace(scene.camera, width=32, height=16)), small)
+    save_scene(scene.replace(camera=dataclasses.replace(scene.camera, width=32, height=16),
+                             render=dataclasses.replace(scene.render, estimator="delta_tracking")), small)
     assert main(["render", str(small), "-o", str(tmp_path / "sky.exr"), "--spp", "32", "--variant", VARIANT, "-q"]) == 0
     assert read_sky_exr(tmp_path / "sky.exr").wavelengths_nm.tolist() == scene.wavelengths_nm.tolist()
     status = main(["invert", str(tmp_path / "sky.exr"), "-o", str(tmp_path / "fit"), "--free", "aod_550",

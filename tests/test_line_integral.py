@@ -396,8 +396,7 @@ def test_single_scattering_alone_needs_the_line_integral(mi):
     from skyref.scene import Scene, Sun
 
     scene = Scene(atmosphere=atm.bruneton2017(), sun=Sun(60.0, 180.0), wavelengths=WL)
-    integ = build_integrator(scene)
-    assert integ.estimator == "delta_tracking"
+    integ = build_integrator(scene, estimator="delta_tracking")
     with pytest.raises(ParameterError, match="orders"):
         integ.render_directions(np.array([[0.0, 0.0, 1.0]]), seed=1, spp=1, orders="single")
     with pytest.raises(ParameterError, match="orders"):

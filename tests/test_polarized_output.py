@@ -15,6 +15,8 @@ from skyref.scene import Camera, RenderSettings, Scene, load_scene
 from skyref.sky import STOKES, Sky, angle_of_linear_polarization, degree_of_linear_polarization
 
 WAVELENGTHS = (680.0, 550.0, 440.0)        # "rgb"
+#: The output is the subject here, not the estimator (both are tested polarized, below and in
+#: test_polarization.py, test_iprt.py): the baseline's kernels compile in seconds.
 SCENE = """\
 [camera]
 type = "equirectangular"
@@ -24,6 +26,7 @@ height = 4
 spp = 16
 passes = 4
 seed = 7
+estimator = "delta_tracking"
 """
 
 
@@ -131,7 +134,7 @@ def test_previews_show_dolp_on_viridis_and_aolp_as_hue(polarized_sky):
 def test_an_adaptive_render_carries_the_stokes_axis(mi):
     """Rounds pool every Stokes component; pixels outside the region are NaN in all of them."""
     scene = Scene(camera=Camera(width=8, height=4), render=RenderSettings(passes=4, region="above_horizon",
-                                                                          polarized=True))
+                                                                          polarized=True, estimator="delta_tracking"))
     sky = render_to_error(scene, 0.02, seeds=[1, 2], max_spp=64, initial_spp=16)
     assert sky.polarized and sky.stokes.shape == (4, 8, 4, 3)
     assert np.all(np.isnan(sky.stokes[2:])) and np.all(np.isfinite(sky.stokes[:2]))

@@ -202,7 +202,7 @@ def test_time_and_place_put_the_sun_where_it_stands(time, place):
 def tiny_scene(tmp_path):
     scene = load_scene(EARTH_CLEAR)
     scene = scene.replace(camera=dataclasses.replace(scene.camera, width=24, height=24), wavelengths="rgb",
-                          render=dataclasses.replace(scene.render, passes=2))
+                          render=dataclasses.replace(scene.render, passes=2, estimator="delta_tracking"))
     path = tmp_path / "tiny.toml"
     save_scene(scene, path)
     return path

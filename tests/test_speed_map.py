@@ -212,7 +212,8 @@ def test_path_tracer_error_is_its_own_noise(tmp_path, mi, monkeypatch):
 
     truth_scene = scene(camera=Camera(type="equirectangular", width=32, height=16),
                         wavelengths=(440.0, 550.0, 680.0), sun=Sun(zenith_deg=30.0),
-                        render=RenderSettings(spp=256, passes=16, seed=5, pixel_sampling="centre"))
+                        render=RenderSettings(spp=256, passes=16, seed=5, pixel_sampling="centre",
+                                                      estimator="delta_tracking"))
     truth = render_sky(truth_scene)
     path = tmp_path / "truth.exr"
     write_sky_exr(truth, path)
@@ -245,7 +246,8 @@ def test_refusals_are_recorded_not_raised(tmp_path, mi):
     from skyref.scene import Camera, RenderSettings
 
     high = scene(camera=Camera(type="equirectangular", width=8, height=4), wavelengths=(440.0, 550.0, 680.0),
-                 observer=Observer(10000.0), render=RenderSettings(spp=8, passes=2, pixel_sampling="centre"))
+                 observer=Observer(10000.0), render=RenderSettings(spp=8, passes=2, pixel_sampling="centre",
+                                                                      estimator="delta_tracking"))
     path = tmp_path / "high.exr"
     write_sky_exr(render_sky(high), path)
     rows = evaluate_map([Entry("hosek2012", "analytic", "published 1.4a")],

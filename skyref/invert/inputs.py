@@ -263,10 +263,13 @@ class Observation:
         return [f"{w:g} nm" for w in self.wavelengths_nm] if self.channels == "spectral" else ["X", "Y", "Z"]
 
     def scene(self, atmosphere, spp=64, seed=0):
-        """A :class:`~skyref.scene.Scene` of this observation's geometry with ``atmosphere``."""
+        """A :class:`~skyref.scene.Scene` of this observation's geometry with ``atmosphere``,
+        rendered by the delta-tracking estimator: the inversion's forward-mode derivatives have
+        been validated and calibrated (results/inversion.md) with it, not yet with the line
+        integral, whose derivative kernels compile again for each set of free parameters."""
         return Scene(atmosphere=atmosphere, sun=self.sun, observer=self.observer, camera=self.camera,
-                     wavelengths=tuple(self.wavelengths_nm), render=RenderSettings(spp=spp, seed=seed, passes=2),
-                     name="fitted")
+                     wavelengths=tuple(self.wavelengths_nm),
+                     render=RenderSettings(spp=spp, seed=seed, passes=2, estimator="delta_tracking"), name="fitted")
 
     def to_channels(self, radiance) -> np.ndarray:
         """Model radiance (..., len(wavelengths_nm)) in the fit's channels (linear in radiance,

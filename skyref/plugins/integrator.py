@@ -4,10 +4,10 @@ A spectral path tracer for the atmosphere alone, written directly in Dr.Jit (no 
 for the planet: the ground and the top of the atmosphere are analytic spheres, or planes, in an
 observer-centred frame, see :mod:`skyref.plugins.geometry`).
 
-Two independent estimators (``estimator``): ``delta_tracking``, the default, described below,
-and ``line_integral`` (:mod:`skyref.plugins.line_integral`; 2-40x less CPU to a given error, but
-kernels that compile for 10-120 s): single scattering by
-quadrature along the camera ray, the sun's optical depth from a table, and forced collisions,
+Two independent estimators (``estimator``): ``line_integral``, the default
+(:mod:`skyref.plugins.line_integral`; 3-40x less CPU to a given error, but kernels that compile
+for 15-120 s per new configuration), and ``delta_tracking``, the baseline described below, which
+the tests compare it against. The line integral computes single scattering by quadrature along the camera ray, the sun's optical depth from a table, and forced collisions,
 so that every path scatters; on the path's later segments the scattered sunlight is sampled at
 ``SAMPLED_SUNLIGHT_POINTS`` stratified points drawn by the segment's lit scattering mass (one
 sun lookup each, where the quadrature pays one per node), so orders >= 2 stay unbiased Monte
