@@ -185,13 +185,49 @@ def test_both_estimators_render_stokes_vectors(mi):
     assert lit.sum() > 30 and np.median(np.abs(z)) < 2.0
 
 
-def test_a_batch_refuses_a_polarized_base_scene(tmp_path, capsys):
+def polarized_grid(tmp_path, output_format="spectral"):
+    grid = tmp_path / "grid.toml"
+    grid.write_text('[base.scene]\ncamera = { type = "equirectangular", width = 8, height = 4 }\n'
+                    'spectral = { wavelengths = "rgb" }\n'
+                    'render = { polarized = true, estimator = "delta_tracking" }\n'
+                    '[axes]\n"sun.zenith_deg" = [30, 60]\n'
+                    f'[output]\ndirectory = "{tmp_path / "out"}"\nformat = "{output_format}"\nspp = 16\npasses = 4\n')
+    return grid
+
+
+def test_a_polarized_batch_holds_the_stokes_vectors_of_its_exrs(mi, tmp_path):
+    """A polarized grid's dataset (zarr and its netCDF copy) holds, per sky, the Stokes vectors
+    and their standard errors of the sky's EXR, value for value; its radiance is I; the
+    stokes_component coordinate names the components and their frame."""
+    import xarray as xr
+
+    from skyref.io.exr import STOKES_FRAME
+
+    assert main(["batch", str(polarized_grid(tmp_path)), "--workers", "1", "--netcdf", "-q"]) == 0
+    out = tmp_path / "out"
+    with xr.open_zarr(out / "dataset.zarr") as zarr_copy, xr.open_dataset(out / "dataset.nc") as netcdf_copy:
+        for dataset in (zarr_copy.load(), netcdf_copy.load()):
+            assert dataset["stokes"].dims == ("sun_zenith_deg", "row", "column", "stokes_component", "wavelength")
+            assert dataset["stokes"].shape == (2, 4, 8, 4, 3)
+            assert list(dataset["stokes_component"].values) == list(STOKES)
+            assert dataset["stokes_component"].attrs["reference_frame"] == STOKES_FRAME
+            exrs = sorted((out / "skies").iterdir())
+            assert len(exrs) == 2
+            for exr in exrs:
+                sky = read_sky_exr(exr)
+                row = dataset.sel(sun_zenith_deg=sky.scene.sun.zenith_deg)
+                assert np.array_equal(row["stokes"].values, sky.stokes)
+                assert np.array_equal(row["stokes_standard_error"].values, sky.stokes_error)
+                assert np.array_equal(row["radiance"].values, sky.stokes[..., 0, :])
+                assert np.abs(sky.Q).max() > 0.05 * sky.I.max()          # the sky is polarized
+
+
+def test_a_polarized_batch_needs_the_spectral_format(tmp_path, capsys):
     from skyref.batch.grid import load_grid
 
-    grid = tmp_path / "grid.toml"
-    grid.write_text('[base.scene]\n[base.scene.render]\npolarized = true\n[axes]\n"sun.zenith_deg" = [30, 60]\n'
-                    f'[output]\ndirectory = "{tmp_path / "out"}"\nspp = 16\npasses = 4\n')
-    with pytest.raises(ParameterError, match="render.polarized = True: not supported in batches") as info:
+    grid = polarized_grid(tmp_path, output_format="rgb")
+    with pytest.raises(ParameterError, match="render.polarized = True: output.format = 'rgb' holds radiance only") \
+            as info:
         load_grid(grid).validate()
     assert info.value.name == "base.scene"
     assert main(["batch", str(grid), "-q"]) == 2 and not (tmp_path / "out").exists()

@@ -8,12 +8,15 @@ netCDF-3 (``dataset.nc``) once every sky is finished.
                  sun_zenith_deg; the axis path stays in the coordinate's ``skyref_axis``
                  attribute), then row, column and wavelength (spectral) or channel (rgb)
     radiance, standard_error  (axes..., row, column, wavelength)  W m-2 sr-1 nm-1  [spectral]
+    stokes, stokes_standard_error  (axes..., row, column, stokes_component, wavelength)  W m-2 sr-1 nm-1
+                              [polarized grids: I, Q, U, V in each pixel's meridian frame
+                              (the coordinate's reference_frame attribute); radiance is I]
     rgb                       (axes..., row, column, channel)     cd m-2           [rgb]
     spp, relative_error_p95   (axes...)                           samples per pixel, 95th
                                                                   percentile of stderr/radiance
     view_zenith_angle, view_azimuth_angle  (row, column)  degree, each pixel centre's direction
     pixel_solid_angle                      (row, column)  sr
-    <axis> (<axis>), wavelength (nm, in vacuum), channel (R, G, B)
+    <axis> (<axis>), wavelength (nm, in vacuum), channel (R, G, B), stokes_component (I, Q, U, V)
 
 The frame is :data:`FRAME` (skyref's, see :mod:`skyref.scene`); a sky not rendered yet is NaN.
 Global attributes hold the grid (``grid``, JSON: base scene, axes, output settings) and the
@@ -38,7 +41,9 @@ from skyref import __version__
 from skyref.batch.grid import dimension_name
 from skyref.errors import ParameterError
 from skyref.io.atomic import atomic_path
+from skyref.io.exr import STOKES_FRAME
 from skyref.projection import equirectangular_pixel, pixel_directions, solid_angle
+from skyref.sky import STOKES
 
 __all__ = ["CONVENTIONS", "FRAME", "REFERENCES", "NETCDF_FORMAT", "NETCDF_MAX_VARIABLE_BYTES", "axis_attributes",
            "view_coordinates", "layout", "check_netcdf_size", "netcdf3_compatible", "write_netcdf"]
@@ -155,13 +160,24 @@ def layout(grid, scene):
             "standard_error": {"units": radiance, "long_name": "standard error of the spectral radiance (spread of "
                                f"{grid.output.passes} independent Monte Carlo passes)"},
         }
+        if scene.render.polarized:
+            images["radiance"]["long_name"] += " (the Stokes vector's I)"
+            images["stokes"] = {"units": radiance, "long_name": "Stokes vector of the spectral radiance reaching the "
+                                "observer from the pixel's view direction", "ancillary_variables":
+                                "stokes_standard_error", "comment": f"each value is {sampled}"}
+            images["stokes_standard_error"] = {"units": radiance, "long_name": "standard error of each Stokes "
+                                               f"component (spread of {grid.output.passes} independent passes)"}
     else:
         pixel_dims, pixel_shape = ("row", "column", "channel"), (camera.height, camera.width, 3)
         images = {"rgb": {"units": "cd m-2", "long_name": "linear sRGB of the spectral radiance, absolute: "
                           "R = G = B = luminance for D65 white"}}
-    variables = {name: (axes + list(pixel_dims), da.full(shape + pixel_shape, np.nan, dtype=np.float32,
-                                                         chunks=ones + pixel_shape), attrs)
-                 for name, attrs in images.items()}
+    variables = {}
+    for name, attrs in images.items():
+        dims, pixels = pixel_dims, pixel_shape
+        if name.startswith("stokes"):                 # (row, column, component, wavelength), as Sky.stokes
+            dims, pixels = ("row", "column", "stokes_component", "wavelength"), pixel_shape[:2] + (len(STOKES), pixel_shape[2])
+        variables[name] = (axes + list(dims), da.full(shape + pixels, np.nan, dtype=np.float32,
+                                                      chunks=ones + pixels), attrs)
     for name, attrs in (("spp", {"units": "1", "long_name": "Monte Carlo samples per rendered pixel (the mean, "
                                                    "where a target error set them per pixel)"}),
                         ("relative_error_p95", {"units": "1", "long_name": "95th percentile over the pixels of "
@@ -178,6 +194,9 @@ def layout(grid, scene):
                                  "long_name": "wavelength in vacuum"})
     else:
         coords["channel"] = ("channel", np.array(["R", "G", "B"]), {"long_name": "linear sRGB channel"})
+    if scene.render.polarized:
+        coords["stokes_component"] = ("stokes_component", np.array(STOKES), {"long_name": "Stokes component",
+                                                          "reference_frame": STOKES_FRAME})
     title = "skyref reference skies" + (f": {scene.name}" if scene.name else "")
     attrs = {"Conventions": CONVENTIONS, "title": title,
              "source": f"skyref {__version__}: spectral Monte Carlo path tracer for a spherical planetary "
@@ -204,6 +223,8 @@ def check_netcdf_size(grid, scene):
     """Raise a ParameterError naming ``--netcdf`` if an image variable of ``grid`` would exceed
     netCDF-3's variable size (:data:`NETCDF_MAX_VARIABLE_BYTES`)."""
     per_pixel = len(scene.wavelengths_nm) if grid.output.format == "spectral" else 3
+    if scene.render.polarized:
+        per_pixel *= len(STOKES)                     # the stokes variable is the largest
     size = 4 * len(grid) * scene.camera.height * scene.camera.width * per_pixel
     if size > NETCDF_MAX_VARIABLE_BYTES:
         raise ParameterError("--netcdf", f"{size / (1 << 30):.1f} GiB per image variable",

@@ -227,15 +227,16 @@ class Grid:
     def validate(self):
         """Build the base scene, the scene of every axis value (the other axes as in the base)
         and the scenes of the grid's corners; raise :class:`ParameterError` naming the base,
-        the axis or the combination at fault (a polarized base scene too: the dataset holds
-        radiance only). Returns the scene of sky 0."""
+        the axis or the combination at fault. A polarized grid (the render settings are the
+        base scene's, the same for every sky) must have the "spectral" format: its dataset holds
+        each wavelength's Stokes vector. Returns the scene of sky 0."""
         def build(coordinates, name, value):
             try:
                 scene = Scene.from_dict(self.scene_dict(coordinates))
-                if scene.render.polarized:
-                    raise ParameterError("render.polarized", True, "false: a batch's dataset holds radiance "
-                                         "only (render polarized skies one by one with skyref render)",
-                                         "not supported in batches yet")
+                if scene.render.polarized and self.output.format != "spectral":
+                    raise ParameterError("render.polarized", True, 'false, or output.format = "spectral" (the '
+                                         "dataset then holds each wavelength's Stokes vector)",
+                                         f"output.format = {self.output.format!r} holds radiance only")
                 check_image_size(scene, self.output.passes)
                 return scene
             except ParameterError as exc:

@@ -46,6 +46,8 @@ def render_and_store(task: dict) -> dict:
     meta = sky.metadata
     if output.format == "spectral":
         images = {"radiance": sky.radiance, "standard_error": sky.standard_error}
+        if sky.polarized:
+            images.update(stokes=sky.stokes, stokes_standard_error=sky.stokes_error)
     else:
         images = {"rgb": sky.rgb().astype(np.float32)}
     store.write_region(spec.index, dict(images, spp=np.float32(meta["spp"]),
