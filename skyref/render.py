@@ -189,7 +189,9 @@ def _sky(scene, pixels, radiance, standard_error, orders, metadata) -> Sky:
                directions=pixel_directions(camera),
                orders={name: np.ascontiguousarray(by_order[..., i, 0, :]) for i, name in enumerate(ORDER_NAMES)},
                scene=scene, metadata=metadata, stokes=total if polarized else None,
-               stokes_error=error if polarized else None)
+               stokes_error=error if polarized else None,
+               order_stokes={name: np.ascontiguousarray(by_order[..., i, :, :]) for i, name in enumerate(ORDER_NAMES)}
+               if polarized else {})
 
 
 def render_sky(scene, spp: int | None = None, passes: int | None = None, seed: int | None = None,

@@ -9,7 +9,9 @@ the Stokes vector (I, Q, U, V) in the same unit, referred to the *meridian frame
 pixel's viewing direction: Q > 0 is light polarized in the vertical plane through the view
 direction, Q < 0 horizontally (conventions, the sign of U among them:
 :mod:`skyref.plugins.polarization`). Its ``radiance`` is I, its ``standard_error`` I's, and its
-``orders`` I per scattering order, so that consumers of radiance work unchanged.
+``orders`` I per scattering order, so that consumers of radiance work unchanged; the Stokes
+vector of each order is in ``order_stokes`` (the sun seen directly is unpolarized: its Q, U,
+V are 0; the orders sum to ``stokes``).
 """
 
 from __future__ import annotations
@@ -68,6 +70,7 @@ class Sky:
     metadata: dict = field(default_factory=dict)
     stokes: np.ndarray | None = None     # (H, W, 4, N) I, Q, U, V (module docstring); None: not polarized
     stokes_error: np.ndarray | None = None   # (H, W, 4, N) their standard errors (None: not polarized)
+    order_stokes: dict = field(default_factory=dict)  # polarized: name in ORDER_NAMES -> (H, W, 4, N)
 
     @property
     def shape(self) -> tuple:

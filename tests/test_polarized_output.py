@@ -67,8 +67,17 @@ def test_the_scene_file_turns_it_on(polarized_sky):
     assert sky.stokes.shape == (4, 8, 4, 3) and sky.stokes_error.shape == (4, 8, 4, 3)
     assert np.array_equal(sky.radiance, sky.I) and np.array_equal(sky.radiance, sky.stokes[..., 0, :])
     assert np.array_equal(sky.standard_error, sky.stokes_error[..., 0, :])
-    # the orders are I per order, and add up to it
+    # the orders are I per order, and add up to it; their Stokes vectors add up to the sky's
     assert np.allclose(sum(sky.orders.values()), sky.radiance, rtol=1e-5, atol=0.0)
+    assert set(sky.order_stokes) == set(sky.orders)
+    for name, values in sky.order_stokes.items():
+        assert values.shape == (4, 8, 4, 3) and np.array_equal(values[..., 0, :], sky.orders[name])
+    scale = np.abs(sky.stokes).max(axis=(0, 1, 2))
+    assert np.allclose(sum(sky.order_stokes.values()), sky.stokes, rtol=0.0, atol=1e-5 * scale.max())
+    # the sun seen directly is unpolarized; single scattering is polarized more than the whole sky
+    assert np.all(sky.order_stokes["sun_direct"][..., 1:, :] == 0.0)
+    single = degree_of_linear_polarization(sky.order_stokes["single"])
+    assert np.nanmax(single[:2]) > sky.degree_of_linear_polarization()[:2].max()
     assert np.all(np.isfinite(sky.stokes)) and np.all(sky.radiance > 0)
     sky_rows, ground_rows = slice(0, 2), slice(2, 4)
     dolp = sky.degree_of_linear_polarization()
@@ -95,9 +104,9 @@ def test_the_command_line_turns_it_on_and_writes_s0_to_s3(mi, scenes, polarized_
     assert header["polarisationHandedness"] == "right" and "meridian" in header["skyref.stokesFrame"]
     assert 'polarized = true' in header["skyref.scene"]
     spectral = [name for name in channels if name not in ("R", "G", "B")]
-    # every Stokes component and its error, I per order, DoLP and AoLP, at every wavelength
+    # every Stokes component and its error, the Stokes vector per order, DoLP and AoLP, at every wavelength
     layers = ([f"S{s}." for s in range(4)] + [f"stderr.S{s}." for s in range(4)]
-              + [f"{order}.S0." for order in polarized_sky.orders] + ["DoLP.", "AoLP."])
+              + [f"{order}.S{s}." for order in polarized_sky.orders for s in range(4)] + ["DoLP.", "AoLP."])
     assert len(spectral) == len(layers) * 3
     stokes = np.stack([stack(channels, f"S{s}.") for s in range(4)], axis=-2)
     # S0 is the render's I (same seed, float32 both): bit for bit, and so is the rest
@@ -116,6 +125,9 @@ def test_the_command_line_turns_it_on_and_writes_s0_to_s3(mi, scenes, polarized_
     back = read_sky_exr(exr)
     assert back.polarized and np.array_equal(back.stokes, polarized_sky.stokes)
     assert np.array_equal(back.stokes_error, polarized_sky.stokes_error)
+    assert back.order_stokes.keys() == polarized_sky.order_stokes.keys()
+    for name, values in back.order_stokes.items():
+        assert np.array_equal(values, polarized_sky.order_stokes[name])
 
 
 def test_previews_show_dolp_on_viridis_and_aolp_as_hue(polarized_sky):

@@ -15,7 +15,8 @@ reference; ``layers`` picks fewer, e.g. ``("rgb",)`` for an environment map):
 - ``error``: ``stderr.S0.<wavelength>nm``, the standard error of the radiance (polarized:
   ``stderr.S1`` to ``stderr.S3`` too, those of Q, U, V);
 - ``orders``: ``<order>.S0.<wavelength>nm`` for each scattering order of
-  :data:`skyref.sky.ORDER_NAMES` the sky has (radiance, I when polarized);
+  :data:`skyref.sky.ORDER_NAMES` the sky has (radiance, I when polarized; a polarized sky's
+  ``order_stokes`` adds ``<order>.S1`` to ``<order>.S3``);
 - ``rgb``: ``R``, ``G``, ``B``, the linear sRGB preview
   (:func:`skyref.color.spectral_to_linear_srgb`, scale: Y in cd m^-2).
 
@@ -185,6 +186,12 @@ def write_sky_exr(sky: Sky, path, layers=LAYERS, half: bool = False, report=None
             if order not in ORDER_NAMES:
                 raise ParameterError("sky.orders", order, ", ".join(ORDER_NAMES), "unknown scattering order")
             spectral[order, 0] = _check_layer(f"sky.orders[{order!r}]", values, shape)
+        for order, values in sky.order_stokes.items():
+            if order not in sky.orders:
+                raise ParameterError("sky.order_stokes", order, "one of the sky's orders: " + ", ".join(sky.orders),
+                                     "no such order in sky.orders")
+            values = _check_layer(f"sky.order_stokes[{order!r}]", values, stokes_shape, polarization)
+            spectral.update((((order, s), values[..., s, :]) for s in range(1, len(STOKES))))
 
     channels = {}
     if "rgb" in layers:
@@ -226,7 +233,8 @@ def read_sky_exr(path) -> Sky:
     The radiance layer is required (a ParameterError names what the file holds instead);
     radiance, standard error and orders come back as float32 arrays (HALF channels widened),
     ``orders`` with the order layers the file has (none: empty). A polarised file (S1-S3
-    channels) gives a polarized sky: ``stokes`` (and ``stokes_error`` with stderr.S1-S3); the
+    channels) gives a polarized sky: ``stokes`` (and ``stokes_error`` with stderr.S1-S3,
+    ``order_stokes`` with <order>.S1-S3); the
     derived DoLP and AoLP layers are not read (the sky computes them). Wavelengths are in
     ascending order, or in the scene's order when the file holds a scene with the same set.
     ``directions`` come from the scene's camera (:func:`skyref.projection.pixel_directions`),
@@ -295,6 +303,7 @@ def read_sky_exr(path) -> Sky:
     orders = {order: stack(order) for order in ORDER_NAMES if (order, 0) in layers}
     stokes_values = stokes("", radiance)
     stokes_error = None if stokes_values is None else stokes(STDERR_LAYER, standard_error)
+    order_stokes = {order: stokes(order, values) for order, values in orders.items()}
     height, width = radiance.shape[:2]
     if scene is not None:
         if (scene.camera.height, scene.camera.width) != (height, width):
@@ -306,4 +315,5 @@ def read_sky_exr(path) -> Sky:
     metadata = json.loads(str(header.get("skyref.metadata", "{}")))
     return Sky(radiance=radiance, standard_error=standard_error, wavelengths_nm=wavelengths,
                directions=directions, orders=orders, scene=scene, metadata=metadata, stokes=stokes_values,
-               stokes_error=stokes_error)
+               stokes_error=stokes_error,
+               order_stokes={order: values for order, values in order_stokes.items() if values is not None})
