@@ -324,7 +324,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="planet geometry (plane_parallel is for comparisons with DISORT)")
     p.add_argument("--estimator", choices=ESTIMATORS, help="the path tracer's estimator (default: the scene's "
                    "render.estimator, line_integral): line_integral needs 3-40x less CPU to a given error "
-                   "(most along pixel centres, render.pixel_sampling = \"centre\") but compiles for 15-120 s "
+                   "(most along pixel centres, render.pixel_sampling = \"centre\") but compiles for 15 s to minutes "
                    "on a new configuration's first run; delta_tracking is the independent baseline")
     p.add_argument("--polarized", action=argparse.BooleanOptionalAction, default=None,
                    help="transport Stokes vectors (default: the scene's render.polarized): the EXR gets the layout's "

@@ -182,9 +182,9 @@ PIXEL_SAMPLING = ("area", "centre")
 #: The ``atmosphere`` integrator's estimators (:mod:`skyref.plugins.integrator`), independent of each
 #: other: ``line_integral`` (the default: single scattering by quadrature along the camera ray,
 #: forced collisions; 3-40x less CPU to a given error, see ``results/groundtruth_speed.md``, but
-#: its kernels take 15-120 s to compile for each new configuration, then come from Dr.Jit's disk
-#: cache) and ``delta_tracking`` (spectral tracking with next-event estimation at every candidate
-#: point: the baseline, and the default before 2026-12-03).
+#: its kernels take 15 s to minutes to compile for each new configuration, then come from
+#: Dr.Jit's disk cache) and ``delta_tracking`` (spectral tracking with next-event estimation at
+#: every candidate point: the baseline, and the default before 2026-12-03).
 ESTIMATORS = ("delta_tracking", "line_integral")
 DEFAULT_ESTIMATOR = "line_integral"
 RENDER_REGIONS = ("all", "above_horizon")

@@ -68,7 +68,7 @@ def ground_truth(mi, sun_zenith, observer_m, views, spp, seeds, max_depth=64):
     scene = Scene(atmosphere=atmosphere(), sun=Sun(sun_zenith, 180.0), observer=Observer(observer_m),
                   wavelengths=WL, render=RenderSettings(max_depth=max_depth))
     # the LUT method is the subject: the path tracer renders with the baseline estimator,
-    # whose kernels compile in seconds (the line integral's in 15-120 s per configuration)
+    # whose kernels compile in seconds (the line integral's in 15 s to minutes per configuration)
     integ = build_integrator(scene, estimator="delta_tracking")
     zen, az = np.array(views, dtype=np.float64).T
     out = np.stack([integ.render_directions(direction(zen, az), seed=s, spp=spp).numpy()

@@ -53,7 +53,7 @@ def ground_truth(mi, atm, sun_zenith_deg, altitude_m, views, max_depth=64):
     scene = Scene(atmosphere=atm, sun=Sun(sun_zenith_deg, 0.0), observer=Observer(altitude_m), wavelengths=WL,
                   render=RenderSettings(max_depth=max_depth))
     # the LUT method is the subject: the path tracer renders with the baseline estimator,
-    # whose kernels compile in seconds (the line integral's in 15-120 s per configuration)
+    # whose kernels compile in seconds (the line integral's in 15 s to minutes per configuration)
     integrator = build_integrator(scene, estimator="delta_tracking")
     x = np.stack([integrator.render_directions(views, seed=s, spp=SPP).numpy() for s in SEEDS]).astype(np.float64)
     return x.mean(axis=0), x.std(axis=0, ddof=1) / math.sqrt(x.shape[0])

@@ -277,7 +277,7 @@ def test_transmittance_matches_the_path_tracer(mi, sun_zenith, spp):
     scene = Scene(atmosphere=atmosphere, sun=Sun(sun_zenith, 180.0), observer=Observer(0.0), wavelengths=WL,
                   render=RenderSettings(max_depth=1))
     # the LUT method is the subject: the path tracer renders with the baseline estimator,
-    # whose kernels compile in seconds (the line integral's in 15-120 s per configuration)
+    # whose kernels compile in seconds (the line integral's in 15 s to minutes per configuration)
     integ = build_integrator(scene, estimator="delta_tracking")
     view = direction_from_angles(sun_zenith, 180.0)[None, :]
     samples = np.stack([integ.render_directions(view, seed=s, spp=spp).numpy()[0, 0] for s in range(32)])

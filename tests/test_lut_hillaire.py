@@ -64,7 +64,7 @@ def ground_truth(atmosphere, sun_zenith, observer_m, directions, spp=8192, seeds
     scene = Scene(atmosphere=atmosphere, sun=Sun(sun_zenith, sun_azimuth), observer=Observer(observer_m),
                   wavelengths=list(wavelengths))
     # the LUT method is the subject: the path tracer renders with the baseline estimator,
-    # whose kernels compile in seconds (the line integral's in 15-120 s per configuration)
+    # whose kernels compile in seconds (the line integral's in 15 s to minutes per configuration)
     integrator = build_integrator(scene, estimator="delta_tracking")
     runs = np.stack([integrator.render_directions(directions, seed=s, spp=spp).numpy() for s in range(seeds)])
     return runs.mean(axis=0), runs.std(axis=0, ddof=1) / np.sqrt(seeds)

@@ -6,8 +6,9 @@ observer-centred frame, see :mod:`skyref.plugins.geometry`).
 
 Two independent estimators (``estimator``): ``line_integral``, the default
 (:mod:`skyref.plugins.line_integral`; 3-40x less CPU to a given error, but kernels that compile
-for 15-120 s per new configuration), and ``delta_tracking``, the baseline described below, which
-the tests compare it against. The line integral computes single scattering by quadrature along the camera ray, the sun's optical depth from a table, and forced collisions,
+for 15 s to minutes per new configuration), and ``delta_tracking``, the baseline described
+below, which the tests compare it against. The line integral computes single scattering by
+quadrature along the camera ray, the sun's optical depth from a table, and forced collisions,
 so that every path scatters; on the path's later segments the scattered sunlight is sampled at
 ``SAMPLED_SUNLIGHT_POINTS`` stratified points drawn by the segment's lit scattering mass (one
 sun lookup each, where the quadrature pays one per node), so orders >= 2 stay unbiased Monte
