@@ -175,7 +175,8 @@ def layout(grid, scene):
     for name, attrs in images.items():
         dims, pixels = pixel_dims, pixel_shape
         if name.startswith("stokes"):                 # (row, column, component, wavelength), as Sky.stokes
-            dims, pixels = ("row", "column", "stokes_component", "wavelength"), pixel_shape[:2] + (len(STOKES), pixel_shape[2])
+            dims = ("row", "column", "stokes_component", "wavelength")
+            pixels = (camera.height, camera.width, len(STOKES), len(scene.wavelengths_nm))
         variables[name] = (axes + list(dims), da.full(shape + pixels, np.nan, dtype=np.float32,
                                                       chunks=ones + pixels), attrs)
     for name, attrs in (("spp", {"units": "1", "long_name": "Monte Carlo samples per rendered pixel (the mean, "
@@ -195,8 +196,8 @@ def layout(grid, scene):
     else:
         coords["channel"] = ("channel", np.array(["R", "G", "B"]), {"long_name": "linear sRGB channel"})
     if scene.render.polarized:
-        coords["stokes_component"] = ("stokes_component", np.array(STOKES), {"long_name": "Stokes component",
-                                                          "reference_frame": STOKES_FRAME})
+        coords["stokes_component"] = ("stokes_component", np.array(STOKES),
+                                      {"long_name": "Stokes component", "reference_frame": STOKES_FRAME})
     title = "skyref reference skies" + (f": {scene.name}" if scene.name else "")
     attrs = {"Conventions": CONVENTIONS, "title": title,
              "source": f"skyref {__version__}: spectral Monte Carlo path tracer for a spherical planetary "

@@ -234,8 +234,8 @@ def read_sky_exr(path) -> Sky:
     radiance, standard error and orders come back as float32 arrays (HALF channels widened),
     ``orders`` with the order layers the file has (none: empty). A polarised file (S1-S3
     channels) gives a polarized sky: ``stokes`` (and ``stokes_error`` with stderr.S1-S3,
-    ``order_stokes`` with <order>.S1-S3); the
-    derived DoLP and AoLP layers are not read (the sky computes them). Wavelengths are in
+    ``order_stokes`` with <order>.S1-S3); the derived DoLP and AoLP layers are not read (the
+    sky computes them). Wavelengths are in
     ascending order, or in the scene's order when the file holds a scene with the same set.
     ``directions`` come from the scene's camera (:func:`skyref.projection.pixel_directions`),
     NaN without a scene; ``standard_error`` is NaN when the file has no ``stderr`` layer.
