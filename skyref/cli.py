@@ -72,7 +72,8 @@ def _describe_scene(scene) -> str:
         f"observer     altitude {scene.observer.altitude_m:g} m",
         f"camera       {scene.camera.type} {scene.camera.width}x{scene.camera.height}, fov {scene.camera.fov_deg:g} deg",
         f"wavelengths  {len(wl)}: {wl[0]:g}–{wl[-1]:g} nm",
-        f"render       {scene.render.spp} spp in {scene.render.passes} passes, seed {scene.render.seed}"
+        f"render       {scene.render.spp} spp in {scene.render.passes} passes, seed {scene.render.seed}, "
+        f"{scene.render.estimator.replace('_', ' ')} estimator"
         + (", polarized (Stokes I, Q, U, V)" if scene.render.polarized else ""),
     ]
     return "\n".join(lines)

@@ -33,6 +33,7 @@ def test_validate_in_process(capsys):
     assert err == ""
     assert f"{EARTH_CLEAR}: valid" in out
     assert "earth-clear" in out and "48: 360–830 nm" in out
+    assert "seed 0, line integral estimator" in out              # the default estimator, named
     # The optical depth it prints is Bruneton 2017's, computed here in closed form.
     sigma_o3 = {440.0: 1.582e-26, 550.0: 3.5e-25, 680.0: 1.209e-25}  # the CSV rows of these wavelengths
     pairs = [(float(w), float(t)) for t, w in re.findall(r"([\d.]+) @ (\d+) nm", out)]
