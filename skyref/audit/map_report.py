@@ -18,7 +18,8 @@ import platform
 import numpy as np
 
 from skyref.audit.metrics import SCALE_DEFINITION
-from skyref.audit.speed_map import FRAME_DIRECTIONS, KINDS, MAP_SKIES, cache_path, load_cached
+from skyref.audit.speed_map import (FRAME_DIRECTIONS, KINDS, MAP_SKIES, cache_path, describe_truth, load_cached,
+                                    truth_provenance)
 from skyref.color import default_exposure, spectral_to_linear_srgb, srgb_luminance, tonemap_srgb8
 from skyref.errors import ParameterError
 from skyref.io.atomic import atomic_path, atomic_write
@@ -409,7 +410,6 @@ def write_map_report(entries, skies, rows, summaries, cache_dir: str, results_di
                    "entries": summaries, "rows": rows}, f, indent=1, default=float)
     plot_pareto(summaries, os.path.join(report_dir, "pareto.png"))
     plot_contact_sheet(entries, skies, cache_dir, os.path.join(report_dir, "contact_sheet.png"))
-    spp = 1024
     lines = [
         "# skyref results", "",
         f"Regenerate this page with `skyref report` (rebuilt {datetime.date.today()} on {machine}). "
@@ -418,8 +418,8 @@ def write_map_report(entries, skies, rows, summaries, cache_dir: str, results_di
         "## Speed against error, every method", "",
         f"Skies: {len(MAP_SKIES)} of the standard grid — "
         + "; ".join(f"{s.kind}: {s.name}" for s in MAP_SKIES)
-        + f". Ground truth: skyref's path tracer, 64x32 pixel-centre directions, 17 wavelengths 380–780 nm, "
-        f"{spp} samples per direction. Error: noise-corrected RMS of the relative luminance error over the sky "
+        + f". Ground truth: skyref's path tracer, {describe_truth(truth_provenance(skies))}. "
+        "Error: noise-corrected RMS of the relative luminance error over the sky "
         "(views that miss the ground, solar disk excluded), the worst sky of each kind, in %; `*` where the "
         "ground truth's noise exceeds 1/5 of the error (not resolved); `refused` where the model refuses the "
         "sky (outside its stated range; `(part)` if some skies of the kind were refused). CIEDE2000: median "
