@@ -30,6 +30,7 @@ import argparse
 import csv
 import dataclasses
 import datetime
+import glob
 import os
 import platform
 import sys
@@ -41,6 +42,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
 from skyref.analytic.hosek import CHANNELS, published_table  # noqa: E402
 from skyref.audit.metrics import NOISE_RATIO, _statistics  # noqa: E402
+from skyref.audit.speed_map import describe_truth, truth_provenance  # noqa: E402
 from skyref.color import default_exposure, tonemap_srgb8  # noqa: E402
 from skyref.fit.cli import FORM_NAMES, noise_line  # noqa: E402
 from skyref.fit.evaluate import (error_summary, interpolation_gap, model_radiance, relative_errors,  # noqa: E402
@@ -219,6 +221,12 @@ def timing_table(metadata, speeds) -> list[str]:
     return lines
 
 
+def truth_description(dataset) -> str:
+    """The ground truth's estimator, samples and CPU cost, from the batch's EXRs and markers."""
+    skies = sorted(glob.glob(os.path.join(dataset, "skies", "*.exr")))
+    return describe_truth(truth_provenance([(None, path) for path in skies]))
+
+
 def write_markdown(path, dataset, coefficients, training_sets, results, metadata, speeds, gaps, figures, load):
     any_set = next(iter(training_sets.values()))
     models = list(MODELS)
@@ -231,7 +239,8 @@ def write_markdown(path, dataset, coefficients, training_sets, results, metadata
              f"{', '.join(f'{t:g}' for t in np.unique(turbidity(any_set)))}; ground albedo "
              f"{', '.join(f'{a:g}' for a in np.unique(any_set.albedo))}; solar elevation "
              f"{', '.join(f'{e:.2f}' for e in np.unique(elevation_deg(any_set)))} deg; "
-             f"{len(any_set.directions)} view directions at or above the horizon) and the tables in "
+             f"{len(any_set.directions)} view directions at or above the horizon; {truth_description(dataset)}) "
+             "and the tables in "
              f"`{shown(coefficients)}` (written {ours.get('created', '?')} by skyref "
              f"{ours.get('skyref_version', '?')}, joint refinement {'on' if ours.get('joint_refinement') else 'off'}).",
              "",
