@@ -148,37 +148,38 @@ def layout(grid, scene):
     axes = [dimension_name(path) for path in grid.axes]
     shape, ones = grid.shape, (1,) * len(grid.shape)
     if grid.output.format == "spectral":
-        pixel_dims = ("row", "column", "wavelength")
-        pixel_shape = (camera.height, camera.width, len(scene.wavelengths_nm))
+        # each image variable's pixel dimensions and their sizes, after the grid's axes
+        spectral = {"row": camera.height, "column": camera.width, "wavelength": len(scene.wavelengths_nm)}
+        stokes = {"row": camera.height, "column": camera.width, "stokes_component": len(STOKES),
+                  "wavelength": len(scene.wavelengths_nm)}                  # as Sky.stokes
         sampled = ("the mean over the pixel's solid angle" if scene.render.pixel_sampling == "area"
                    else "the radiance along the pixel centre's direction")
         radiance = "W m-2 sr-1 nm-1"
         images = {
-            "radiance": {"units": radiance, "long_name": "spectral radiance reaching the observer from the pixel's "
-                         "view direction", "ancillary_variables": "standard_error",
-                         "comment": f"each value is {sampled}"},
-            "standard_error": {"units": radiance, "long_name": "standard error of the spectral radiance (spread of "
-                               f"{grid.output.passes} independent Monte Carlo passes)"},
+            "radiance": (spectral, {"units": radiance, "long_name": "spectral radiance reaching the observer from "
+                                    "the pixel's view direction", "ancillary_variables": "standard_error",
+                                    "comment": f"each value is {sampled}"}),
+            "standard_error": (spectral, {"units": radiance, "long_name": "standard error of the spectral radiance "
+                                          f"(spread of {grid.output.passes} independent Monte Carlo passes)"}),
         }
         if scene.render.polarized:
-            images["radiance"]["long_name"] += " (the Stokes vector's I)"
-            images["stokes"] = {"units": radiance, "long_name": "Stokes vector of the spectral radiance reaching the "
-                                "observer from the pixel's view direction", "ancillary_variables":
-                                "stokes_standard_error", "comment": f"each value is {sampled}"}
-            images["stokes_standard_error"] = {"units": radiance, "long_name": "standard error of each Stokes "
-                                               f"component (spread of {grid.output.passes} independent passes)"}
+            images["radiance"][1]["long_name"] += " (the Stokes vector's I)"
+            images["stokes"] = (stokes, {"units": radiance, "long_name": "Stokes vector of the spectral radiance "
+                                         "reaching the observer from the pixel's view direction",
+                                         "ancillary_variables": "stokes_standard_error",
+                                         "comment": f"each value is {sampled}"})
+            images["stokes_standard_error"] = (stokes, {"units": radiance, "long_name": "standard error of each "
+                                                        f"Stokes component (spread of {grid.output.passes} "
+                                                        "independent passes)"})
     else:
-        pixel_dims, pixel_shape = ("row", "column", "channel"), (camera.height, camera.width, 3)
-        images = {"rgb": {"units": "cd m-2", "long_name": "linear sRGB of the spectral radiance, absolute: "
-                          "R = G = B = luminance for D65 white"}}
+        images = {"rgb": ({"row": camera.height, "column": camera.width, "channel": 3},
+                          {"units": "cd m-2", "long_name": "linear sRGB of the spectral radiance, absolute: "
+                           "R = G = B = luminance for D65 white"})}
     variables = {}
-    for name, attrs in images.items():
-        dims, pixels = pixel_dims, pixel_shape
-        if name.startswith("stokes"):                 # (row, column, component, wavelength), as Sky.stokes
-            dims = ("row", "column", "stokes_component", "wavelength")
-            pixels = (camera.height, camera.width, len(STOKES), len(scene.wavelengths_nm))
-        variables[name] = (axes + list(dims), da.full(shape + pixels, np.nan, dtype=np.float32,
-                                                      chunks=ones + pixels), attrs)
+    for name, (pixel_axes, attrs) in images.items():
+        pixels = tuple(pixel_axes.values())
+        variables[name] = (axes + list(pixel_axes), da.full(shape + pixels, np.nan, dtype=np.float32,
+                                                            chunks=ones + pixels), attrs)
     for name, attrs in (("spp", {"units": "1", "long_name": "Monte Carlo samples per rendered pixel (the mean, "
                                                    "where a target error set them per pixel)"}),
                         ("relative_error_p95", {"units": "1", "long_name": "95th percentile over the pixels of "
