@@ -221,7 +221,7 @@ def render_sky(scene, spp: int | None = None, passes: int | None = None, seed: i
     if progress:
         bar = tqdm(total=settings.passes * spp_per_pass, unit="spp", desc=f"render {scene.name or 'sky'}")
         # Dr.Jit compiles a new configuration's path kernels in the first launch (the line
-        # integral's for up to ~2 min); they are cached on disk after that
+        # integral's for up to minutes, docs/design.md); they are cached on disk after that
         bar.set_postfix_str("compiling the path kernels unless cached")
 
         def advance(count):

@@ -303,7 +303,8 @@ def read_sky_exr(path) -> Sky:
     orders = {order: stack(order) for order in ORDER_NAMES if (order, 0) in layers}
     stokes_values = stokes("", radiance)
     stokes_error = None if stokes_values is None else stokes(STDERR_LAYER, standard_error)
-    order_stokes = {order: stokes(order, values) for order, values in orders.items()}
+    order_stokes = {order: vectors for order, values in orders.items()
+                    if (vectors := stokes(order, values)) is not None}
     height, width = radiance.shape[:2]
     if scene is not None:
         if (scene.camera.height, scene.camera.width) != (height, width):
@@ -315,5 +316,4 @@ def read_sky_exr(path) -> Sky:
     metadata = json.loads(str(header.get("skyref.metadata", "{}")))
     return Sky(radiance=radiance, standard_error=standard_error, wavelengths_nm=wavelengths,
                directions=directions, orders=orders, scene=scene, metadata=metadata, stokes=stokes_values,
-               stokes_error=stokes_error,
-               order_stokes={order: values for order, values in order_stokes.items() if values is not None})
+               stokes_error=stokes_error, order_stokes=order_stokes)
