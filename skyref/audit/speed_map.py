@@ -42,7 +42,7 @@ import numpy as np
 from skyref.analytic import analytic_model
 from skyref.analytic.hosek import TURBIDITIES
 from skyref.atmosphere import turbidity
-from skyref.batch.store import sha256_of
+from skyref.batch.store import marker_of_exr, sha256_of
 from skyref.errors import ParameterError
 from skyref.fit.export import read_spectral_table
 from skyref.io.atomic import atomic_path
@@ -215,10 +215,8 @@ def truth_provenance(skies) -> dict:
         truth = read_sky_exr(path)
         estimators.add(truth.metadata.get("estimator", "delta_tracking"))
         spp.append(float(truth.metadata["spp"]))
-        marker = os.path.join(os.path.dirname(os.path.dirname(path)), "markers",
-                              os.path.splitext(os.path.basename(path))[0] + ".json")
         try:
-            with open(marker) as f:
+            with open(marker_of_exr(path)) as f:
                 seconds = float(json.load(f)["task_cpu_s"])
         except (OSError, ValueError, KeyError):
             seconds = None

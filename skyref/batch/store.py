@@ -42,7 +42,7 @@ from skyref.errors import ParameterError
 from skyref.io.atomic import atomic_write
 from skyref.validation import check_output_directory
 
-__all__ = ["DATASET", "NETCDF", "sha256_of", "BatchStore"]
+__all__ = ["DATASET", "NETCDF", "sha256_of", "marker_of_exr", "BatchStore"]
 
 DATASET = "dataset.zarr"
 NETCDF = "dataset.nc"
@@ -54,6 +54,13 @@ def sha256_of(path) -> str:
         for block in iter(lambda: f.read(1 << 20), b""):
             digest.update(block)
     return digest.hexdigest()
+
+
+def marker_of_exr(exr_path) -> str:
+    """The completion marker of the sky whose EXR is ``exr_path`` (``<directory>/skies/<id>.exr``
+    -> ``<directory>/markers/<id>.json``)."""
+    directory = os.path.dirname(os.path.dirname(os.fspath(exr_path)))
+    return os.path.join(directory, "markers", os.path.splitext(os.path.basename(exr_path))[0] + ".json")
 
 
 class BatchStore:
@@ -69,7 +76,7 @@ class BatchStore:
         return os.path.join(self.directory, "skies", f"{sky_id}.exr")
 
     def marker_path(self, sky_id: str) -> str:
-        return os.path.join(self.directory, "markers", f"{sky_id}.json")
+        return marker_of_exr(self.exr_path(sky_id))
 
     # --- opening ----------------------------------------------------------------------------
 
