@@ -134,6 +134,23 @@ def test_skies_with_the_sun_below_the_horizon_are_left_out():
     assert np.all(np.isnan(result.configurations[6]))
 
 
+def test_an_unfinished_batch_is_said_to_be_one():
+    """Skies with no data (a batch still rendering) are counted apart in what skyref fit prints,
+    so that its error table does not claim the whole grid."""
+    from skyref.fit.cli import _summary_lines, noise_line
+
+    truth = normalised_truth(hosek_control(), ELEVATIONS_6)
+    training = training_for(truth, ELEVATIONS_6)
+    radiance = training.radiance.copy()
+    radiance[[1, 4]] = np.nan
+    unfinished = dataclasses.replace(training, radiance=radiance)
+    assert noise_line(unfinished).endswith("2 of the 6 skies have no data (an unfinished batch?): "
+                                           "their configurations are not fitted")
+    assert "ground truth (4 of 6 skies)" in _summary_lines("test", truth, unfinished)[0]
+    assert "skies have no data" not in noise_line(training)
+    assert "ground truth (6 skies)" in _summary_lines("test", truth, training)[0]
+
+
 def perturbed(table, seed):
     rng = np.random.default_rng(seed)
     return CoefficientTable(table.form, table.kind, table.coefficients * (1 + 1e-3 * rng.standard_normal(table.coefficients.shape)),

@@ -114,8 +114,9 @@ def _statistics(error, noise) -> dict:
     rms = float(np.sqrt(max(mean_square, 0.0)))
     ms_noise = float(np.sqrt(np.sum(4.0 * e * e * n * n + 2.0 * n ** 4)) / count)
     a = np.abs(e)
+    scale = max(2.0 * rms, float(np.sqrt(ms_noise)))                  # 0 only for exact, noiseless data
     return {"mean": float(e.mean()), "noise_mean": float(np.sqrt(np.sum(n * n)) / count),
-            "rms": rms, "noise_rms": ms_noise / max(2.0 * rms, float(np.sqrt(ms_noise))),
+            "rms": rms, "noise_rms": ms_noise / scale if scale > 0.0 else 0.0,
             "p95": float(np.percentile(a, 95.0)), "noise_p95": float(np.percentile(n, 95.0)),
             "max": float(a.max()), "noise_max": float(n.max())}
 

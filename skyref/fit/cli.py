@@ -57,13 +57,28 @@ def _kinds(text: str, available) -> list[str]:
     return chosen
 
 
+def _skies_with_data(training) -> int:
+    """How many of the training set's skies have any radiance (an unfinished batch has fewer)."""
+    return int(np.isfinite(training.radiance).any(axis=(1, 2)).sum())
+
+
+def _skies_text(training) -> str:
+    """``"260 skies"``, or ``"35 of 260 skies"`` where some have no data."""
+    total, rendered = len(training.solar_elevation), _skies_with_data(training)
+    return f"{total} skies" if rendered == total else f"{rendered} of {total} skies"
+
+
 def noise_line(training) -> str:
+    """The data's noise, and how many of its skies have data where some have none."""
+    missing = len(training.solar_elevation) - _skies_with_data(training)
+    coverage = (f"; {missing} of the {len(training.solar_elevation)} skies have no data (an unfinished batch?): "
+                "their configurations are not fitted" if missing else "")
     noise = training.relative_noise()
     finite = noise[np.isfinite(noise)]
     if finite.size == 0:
-        return "noise: none recorded"
+        return "noise: none recorded" + coverage
     return (f"noise of the data (standard error / radiance over fitted directions): median "
-            f"{100 * np.median(finite):.2f}%, 95th percentile {100 * np.percentile(finite, 95):.2f}%")
+            f"{100 * np.median(finite):.2f}%, 95th percentile {100 * np.percentile(finite, 95):.2f}%" + coverage)
 
 
 def _summary_lines(name, table, training) -> list[str]:
@@ -72,7 +87,7 @@ def _summary_lines(name, table, training) -> list[str]:
     from skyref.fit.evaluate import error_summary
 
     summary = error_summary(table, training)
-    lines = [f"{name} vs {training.kind} ground truth ({len(training.solar_elevation)} skies): relative error, %",
+    lines = [f"{name} vs {training.kind} ground truth ({_skies_text(training)}): relative error, %",
              f"  {'channel':>8} {'mean':>8} {'rms':>8} {'p95':>8} {'max':>8}   (truth's noise: rms, p95)"]
     for channel, stats in summary["channels"].items():
         if stats is None:
