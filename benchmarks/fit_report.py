@@ -30,7 +30,6 @@ import argparse
 import csv
 import dataclasses
 import datetime
-import glob
 import os
 import platform
 import sys
@@ -42,7 +41,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
 from skyref.analytic.hosek import CHANNELS, published_table  # noqa: E402
 from skyref.audit.metrics import NOISE_RATIO, _statistics  # noqa: E402
-from skyref.audit.speed_map import describe_truth, truth_provenance  # noqa: E402
+from skyref.batch.provenance import batch_skies, describe_truth, truth_provenance  # noqa: E402
 from skyref.color import default_exposure, tonemap_srgb8  # noqa: E402
 from skyref.fit.cli import FORM_NAMES, noise_line  # noqa: E402
 from skyref.fit.evaluate import (error_summary, interpolation_gap, model_radiance, relative_errors,  # noqa: E402
@@ -223,8 +222,7 @@ def timing_table(metadata, speeds) -> list[str]:
 
 def truth_description(dataset) -> str:
     """The ground truth's estimator, samples and CPU cost, from the batch's EXRs and markers."""
-    skies = sorted(glob.glob(os.path.join(dataset, "skies", "*.exr")))
-    return describe_truth(truth_provenance([(None, path) for path in skies]))
+    return describe_truth(truth_provenance(batch_skies(dataset)))
 
 
 def write_markdown(path, dataset, coefficients, training_sets, results, metadata, speeds, gaps, figures, load):

@@ -240,3 +240,36 @@ def test_part_of_a_grid_renders_those_skies_as_the_whole_grid_would(write_grid, 
     a = read_sky_exr(tmp_path / "part" / "skies" / "sky-2.exr")
     b = read_sky_exr(tmp_path / "whole" / "skies" / "sky-2.exr")
     np.testing.assert_array_equal(a.radiance, b.radiance)
+
+
+def test_the_truth_says_what_it_is_and_what_it_cost(tmp_path):
+    """truth_provenance reads the estimator and samples from each truth EXR and the CPU time
+    from the batch's markers; a truth written before EXRs named their estimator was delta
+    tracking's; without a marker the cost is unknown (None), not 0."""
+    from skyref.batch.provenance import batch_skies, describe_truth, truth_provenance
+    from skyref.io.exr import write_sky_exr
+    from skyref.projection import pixel_directions
+    from skyref.scene import Camera, Scene
+    from skyref.sky import Sky
+
+    (tmp_path / "skies").mkdir()
+    (tmp_path / "markers").mkdir()
+    truth_scene = Scene(camera=Camera(type="equirectangular", width=8, height=4), wavelengths=(440.0, 550.0))
+    for name, spp, estimator in (("sky-000", 16, "line_integral"), ("sky-001", 32, None)):
+        # sky-001 as EXRs were written before the line integral: no estimator in the metadata
+        metadata = {"spp": spp} if estimator is None else {"spp": spp, "estimator": estimator}
+        values = np.ones((4, 8, 2), dtype=np.float32)
+        write_sky_exr(Sky(radiance=values, standard_error=0.01 * values, wavelengths_nm=np.array([440.0, 550.0]),
+                          directions=pixel_directions(truth_scene.camera), scene=truth_scene, metadata=metadata),
+                      tmp_path / "skies" / f"{name}.exr")
+        (tmp_path / "markers" / f"{name}.json").write_text(json.dumps({"task_cpu_s": 1800.0 + spp}))
+    skies = batch_skies(tmp_path)
+    assert [os.path.basename(path) for path in skies] == ["sky-000.exr", "sky-001.exr"]
+    found = truth_provenance(skies)
+    assert found == {"estimators": ["delta_tracking", "line_integral"], "camera": "8x4 equirectangular",
+                     "wavelengths": (2, 440.0, 550.0), "spp": (16.0, 32.0), "cpu_s": 3648.0}
+    assert describe_truth(found) == ("delta tracking and line integral estimators, 8x4 equirectangular pixel-centre "
+                                     "directions, 2 wavelengths 440–550 nm, 16–32 samples per direction on average "
+                                     "(rendered to an error target), 1.01 CPU hours")
+    (tmp_path / "markers" / "sky-001.json").unlink()
+    assert truth_provenance(skies)["cpu_s"] is None

@@ -319,10 +319,39 @@ def test_cli_fits_writes_and_evaluates(tmp_path, capsys):
     training = load_batch_dataset(batch)["spectral"]
     error, _ = relative_errors(tables["spectral"], training)
     assert np.nanmax(np.abs(error)) < 1e-4, np.nanmax(np.abs(error))
+    assert metadata["truth"] is None                       # a dataset without the batch's sky EXRs
     assert run_cli(["--evaluate", str(out / "hosek.npz"), "--grid", str(batch), "--kinds", "spectral"]) == 0
     assert run_cli(["--evaluate", "published", "--grid", str(batch)]) == 0
     report = capsys.readouterr().out
     assert "published Hosek-Wilkie 1.4a vs spectral ground truth" in report and "by elevation" in report
+
+
+def test_a_fitted_table_names_its_ground_truth(tmp_path):
+    """The tables carry the provenance of the skies they were fitted to (estimator, samples, CPU
+    time, from the batch's EXRs and markers): in the npz/JSON metadata and the C headers."""
+    import json
+
+    from skyref.io.exr import write_sky_exr
+    from skyref.scene import Scene
+    from skyref.sky import Sky
+
+    zeniths = [90.0 - math.degrees(e) for e in ELEVATIONS_6]
+    batch = synthetic_batch(tmp_path, in_bounds(published_table()), [3.0], [0.0], zeniths, wavelengths=[440.0])
+    (batch / "skies").mkdir(exist_ok=True)
+    truth_scene = Scene(camera=CAMERA, wavelengths=(440.0,))
+    values = np.ones((CAMERA.height, CAMERA.width, 1), dtype=np.float32)
+    write_sky_exr(Sky(radiance=values, standard_error=0.01 * values, wavelengths_nm=np.array([440.0]),
+                      directions=pixel_directions(CAMERA), scene=truth_scene,
+                      metadata={"spp": 4096, "estimator": "line_integral"}), batch / "skies" / "sky-0.exr")
+    (batch / "markers" / "sky-0.json").write_text(json.dumps({"task_cpu_s": 7200.0}))
+    out = tmp_path / "coefficients"
+    assert run_cli(["--grid", str(batch), "--out", str(out), "--no-perez", "--no-joint", "-q"]) == 0
+    _, metadata = read_tables(out / "hosek.npz")
+    truth = metadata["truth"]
+    assert truth["estimators"] == ["line_integral"] and truth["skies"] == 1 and truth["cpu_s"] == 7200.0
+    assert truth["description"].endswith("4096 samples per direction, 2.00 CPU hours")
+    header = (out / "ArHosekSkyModelData_Spectral.h").read_text()
+    assert f"Ground truth: skyref's path tracer, {truth['description']} (1 sky)." in header
 
 
 @pytest.mark.parametrize("call,name", [

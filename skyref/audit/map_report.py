@@ -18,8 +18,8 @@ import platform
 import numpy as np
 
 from skyref.audit.metrics import SCALE_DEFINITION
-from skyref.audit.speed_map import (FRAME_DIRECTIONS, KINDS, MAP_SKIES, cache_path, describe_truth, load_cached,
-                                    truth_provenance)
+from skyref.audit.speed_map import FRAME_DIRECTIONS, KINDS, MAP_SKIES, cache_path, load_cached
+from skyref.batch.provenance import describe_truth, truth_provenance
 from skyref.color import default_exposure, spectral_to_linear_srgb, srgb_luminance, tonemap_srgb8
 from skyref.errors import ParameterError
 from skyref.io.atomic import atomic_path, atomic_write
@@ -418,7 +418,7 @@ def write_map_report(entries, skies, rows, summaries, cache_dir: str, results_di
         "## Speed against error, every method", "",
         f"Skies: {len(MAP_SKIES)} of the standard grid — "
         + "; ".join(f"{s.kind}: {s.name}" for s in MAP_SKIES)
-        + f". Ground truth: skyref's path tracer, {describe_truth(truth_provenance(skies))}. "
+        + f". Ground truth: skyref's path tracer, {describe_truth(truth_provenance(path for _, path in skies))}. "
         "Error: noise-corrected RMS of the relative luminance error over the sky "
         "(views that miss the ground, solar disk excluded), the worst sky of each kind, in %; `*` where the "
         "ground truth's noise exceeds 1/5 of the error (not resolved); `refused` where the model refuses the "

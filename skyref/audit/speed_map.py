@@ -42,7 +42,7 @@ import numpy as np
 from skyref.analytic import analytic_model
 from skyref.analytic.hosek import TURBIDITIES
 from skyref.atmosphere import turbidity
-from skyref.batch.store import marker_of_exr, sha256_of
+from skyref.batch.store import sha256_of
 from skyref.errors import ParameterError
 from skyref.fit.export import read_spectral_table
 from skyref.io.atomic import atomic_path
@@ -53,7 +53,7 @@ from skyref.sky_method import Operations
 
 __all__ = ["CACHE_VERSION", "ENTRIES", "FRAME_DIRECTIONS", "KINDS", "MAP_SKIES", "TRUTH_GRID", "Entry", "MapSky",
            "PathTracerView", "build_method", "cache_path", "entry_summary", "evaluate_map", "fitted_entries",
-           "frame_seconds", "load_cached", "save_cached", "truth_skies", "truth_provenance", "describe_truth"]
+           "frame_seconds", "load_cached", "save_cached", "truth_skies"]
 
 #: Directions of the frame the map's "frame" cost refers to (1920 x 1080).
 FRAME_DIRECTIONS = 1920 * 1080
@@ -201,43 +201,6 @@ def truth_skies(grid) -> list[tuple[MapSky, str]]:
     if missing:
         raise ParameterError("truth grid", TRUTH_GRID, "a grid holding every map sky", f"missing: {missing}")
     return [(sky, found[sky]) for sky in MAP_SKIES]
-
-
-def truth_provenance(skies) -> dict:
-    """What the ground truth of ``skies`` ((sky, EXR path) as :func:`truth_skies` gives them)
-    is, from each EXR's scene and metadata and its batch marker (``markers/<id>.json`` beside
-    ``skies/``): ``estimators`` (sorted names; a sky rendered before the metadata named its
-    estimator was delta tracking's), ``camera`` (e.g. "64x32 equirectangular"), ``wavelengths``
-    (count, first, last, nm), ``spp`` (the smallest and largest of the skies' mean samples per
-    direction) and ``cpu_s``, the CPU seconds the batch spent on them (None if a marker lacks it)."""
-    estimators, spp, cpu = set(), [], 0.0
-    for _, path in skies:
-        truth = read_sky_exr(path)
-        estimators.add(truth.metadata.get("estimator", "delta_tracking"))
-        spp.append(float(truth.metadata["spp"]))
-        try:
-            with open(marker_of_exr(path)) as f:
-                seconds = float(json.load(f)["task_cpu_s"])
-        except (OSError, ValueError, KeyError):
-            seconds = None
-        cpu = None if cpu is None or seconds is None else cpu + seconds
-    camera, wavelengths = truth.scene.camera, truth.wavelengths_nm
-    return {"estimators": sorted(estimators), "camera": f"{camera.width}x{camera.height} {camera.type}",
-            "wavelengths": (len(wavelengths), float(wavelengths.min()), float(wavelengths.max())),
-            "spp": (min(spp), max(spp)), "cpu_s": cpu}
-
-
-def describe_truth(provenance: dict) -> str:
-    """:func:`truth_provenance` in words, for reports."""
-    low, high = provenance["spp"]
-    samples = (f"{low:.0f} samples per direction" if low == high else
-               f"{low:.0f}–{high:.0f} samples per direction on average (rendered to an error target)")
-    count, first, last = provenance["wavelengths"]
-    names = provenance["estimators"]
-    text = (" and ".join(name.replace("_", " ") for name in names) + (" estimators" if len(names) > 1 else " estimator")
-            + f", {provenance['camera']} pixel-centre directions, {count} wavelengths {first:g}–{last:g} nm, "
-            + samples)
-    return text if provenance["cpu_s"] is None else text + f", {provenance['cpu_s'] / 3600.0:.2f} CPU hours"
 
 
 def _summary(found: dict) -> dict:

@@ -13,13 +13,14 @@ import os
 import numpy as np
 
 from skyref.analytic.hosek import published_table
+from skyref.batch.provenance import batch_skies, describe_truth, truth_provenance
 from skyref.errors import ParameterError
 from skyref.fit.export import read_tables, write_tables
 from skyref.fit.fitter import PRIOR_WEIGHT, fit_table
 from skyref.fit.training import load_batch_dataset
 from skyref.validation import check_number, check_output_directory
 
-__all__ = ["FORM_NAMES", "KINDS", "add_fit_parser", "cmd_fit", "noise_line"]
+__all__ = ["FORM_NAMES", "KINDS", "add_fit_parser", "cmd_fit", "noise_line", "truth_metadata"]
 
 KINDS = ("spectral", "xyz", "rgb")
 FORM_NAMES = {"hosek": "Hosek-Wilkie", "perez": "Perez (Preetham-style baseline)"}
@@ -141,12 +142,24 @@ def _evaluate(args, training_sets) -> int:
     return 0
 
 
+def truth_metadata(training) -> dict | None:
+    """The provenance of a training set's ground truth (:func:`skyref.batch.provenance.truth_provenance`,
+    with its ``description`` in words) from the sky EXRs of the batch directory holding its dataset;
+    None where there are none (a dataset copied without them)."""
+    skies = batch_skies(os.path.dirname(os.path.abspath(training.source)))
+    if not skies:
+        return None
+    provenance = truth_provenance(skies)
+    return {"description": describe_truth(provenance), "skies": len(skies), **provenance}
+
+
 def _fit(args, training_sets) -> int:
     if not args.out:
         raise ParameterError("--out", None, "a directory for the fitted tables", "missing (or give --evaluate)")
     check_output_directory(args.out, "--out")     # created by the first table written
     kinds = _kinds(args.kinds, list(training_sets))
     progress = _progress(args.quiet)
+    truth = truth_metadata(training_sets[kinds[0]])
     written = []
     for form in ("hosek",) if args.no_perez else ("hosek", "perez"):
         tables, runs, notes = {}, {}, {}
@@ -159,7 +172,10 @@ def _fit(args, training_sets) -> int:
             tables[kind] = result.table
             unfitted = [f"{channel}" for channel, done in zip(result.table.channels, result.fitted.any(axis=(1, 2)))
                         if not done]
-            notes[kind] = ("Channels not fitted (start values kept): " + ", ".join(unfitted)) if unfitted else ""
+            notes[kind] = "\n".join(
+                ([f"Ground truth: skyref's path tracer, {truth['description']} "
+                  f"({truth['skies']} {'sky' if truth['skies'] == 1 else 'skies'})."] if truth else [])
+                + (["Channels not fitted (start values kept): " + ", ".join(unfitted)] if unfitted else []))
             runs[kind] = {"channels_fitted": [c for c in result.table.channels if c not in unfitted],
                           "fitted_groups": result.fitted.tolist(), "timings_s": result.timings,
                           "unconverged": result.unconverged, "most_steps": result.most_steps,
@@ -169,7 +185,8 @@ def _fit(args, training_sets) -> int:
                   f"unconverged problems: {result.unconverged}")
             print("\n".join(_summary_lines(f"{FORM_NAMES[form]} fit", result.table, training)))
         metadata = {"source": f"skyref fit of {os.path.abspath(args.grid)}", "training": args.grid,
-                    "joint_refinement": not args.no_joint, "joint_prior_weight": args.joint_prior_weight, "fits": runs}
+                    "joint_refinement": not args.no_joint, "joint_prior_weight": args.joint_prior_weight, "fits": runs,
+                    "truth": truth}
         written += write_tables(tables, args.out, form, metadata=metadata, notes=notes)
     print("wrote " + ", ".join(written))
     return 0
