@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import os
 
 import numpy as np
 import pytest
@@ -255,3 +256,21 @@ def test_refusals_are_recorded_not_raised(tmp_path, mi):
                         log=lambda *_: None)
     assert "observer_altitude_m" in rows[0]["refused"]
     assert entry_summary(rows)[0]["kinds"]["high altitude"] is None
+
+
+def test_every_map_sky_is_found_on_the_truth_grid():
+    """Each map sky is the truth grid's sky with its atmosphere, altitude and sun, and its truth is
+    that sky's EXR in the batch directory."""
+    from skyref.audit.speed_map import MAP_SKIES, TRUTH_GRID, map_sky_specs, truth_skies
+    from skyref.batch.grid import load_grid
+    from skyref.scene import Scene
+
+    grid = load_grid(TRUTH_GRID)
+    found = map_sky_specs(grid)
+    assert [sky for sky, _ in found] == list(MAP_SKIES)
+    for sky, spec in found:
+        truth_scene = Scene.from_dict(spec.scene)
+        assert truth_scene.observer.altitude_m == sky.altitude_m and truth_scene.sun.zenith_deg == sky.sun_zenith_deg
+        assert spec.coordinates["atmosphere"] == grid.axes["atmosphere"][sky.atmosphere]
+    assert [path for _, path in truth_skies(grid)] == [
+        os.path.join(grid.output.directory, "skies", f"{spec.sky_id}.exr") for _, spec in found]

@@ -53,7 +53,7 @@ from skyref.sky_method import Operations
 
 __all__ = ["CACHE_VERSION", "ENTRIES", "FRAME_DIRECTIONS", "KINDS", "MAP_SKIES", "TRUTH_GRID", "Entry", "MapSky",
            "PathTracerView", "build_method", "cache_path", "entry_summary", "evaluate_map", "fitted_entries",
-           "frame_seconds", "load_cached", "save_cached", "truth_skies"]
+           "frame_seconds", "load_cached", "save_cached", "map_sky_specs", "truth_skies"]
 
 #: Directions of the frame the map's "frame" cost refers to (1920 x 1080).
 FRAME_DIRECTIONS = 1920 * 1080
@@ -187,8 +187,8 @@ class PathTracerView:
 
 # --- evaluating the map -------------------------------------------------------------------------
 
-def truth_skies(grid) -> list[tuple[MapSky, str]]:
-    """(sky, path of its ground-truth EXR) of every map sky, from the truth grid."""
+def map_sky_specs(grid) -> list:
+    """(sky, its :class:`~skyref.batch.grid.SkySpec` on ``grid``) of every map sky, in map order."""
     atmospheres = grid.axes["atmosphere"]
     found = {}
     for spec in grid.skies():
@@ -196,11 +196,16 @@ def truth_skies(grid) -> list[tuple[MapSky, str]]:
         for sky in MAP_SKIES:
             if (c["atmosphere"] == atmospheres[sky.atmosphere] and c["observer.altitude_m"] == sky.altitude_m
                     and c["sun.zenith_deg"] == sky.sun_zenith_deg):
-                found[sky] = os.path.join(grid.output.directory, "skies", f"{spec.sky_id}.exr")
+                found[sky] = spec
     missing = [s.name for s in MAP_SKIES if s not in found]
     if missing:
         raise ParameterError("truth grid", TRUTH_GRID, "a grid holding every map sky", f"missing: {missing}")
     return [(sky, found[sky]) for sky in MAP_SKIES]
+
+
+def truth_skies(grid) -> list[tuple[MapSky, str]]:
+    """(sky, path of its ground-truth EXR) of every map sky, from the truth grid."""
+    return [(sky, os.path.join(grid.output.directory, "skies", f"{spec.sky_id}.exr")) for sky, spec in map_sky_specs(grid)]
 
 
 def _summary(found: dict) -> dict:
