@@ -54,7 +54,7 @@ SEED = 7
 CLOSE = 0.10
 
 
-def render_truths(spp: int) -> dict:
+def render_truths(spp: int) -> tuple[dict, dict]:
     """mode -> [(map sky, EXR path)], rendering the truths that are not on disk yet; and the CPU
     seconds each cost (mode -> sky name -> s; kept beside the EXR)."""
     grid = load_grid(os.path.join(ROOT, TRUTH_GRID))
@@ -96,6 +96,7 @@ def truth_difference(scalar_path: str, polarized_path: str) -> dict:
 
 
 def cell(kind_summary) -> str:
+    """A table cell: a kind's worst luminance RMS in %, `*` if not resolved, `(part)` if some skies were refused."""
     if kind_summary is None:
         return "refused"
     text = f"{100 * kind_summary['rms']:.2f}" + ("" if kind_summary["resolved"] else "*")
