@@ -134,6 +134,27 @@ def test_skies_with_the_sun_below_the_horizon_are_left_out():
     assert np.all(np.isnan(result.configurations[6]))
 
 
+def test_a_group_an_unfinished_batch_leaves_short_is_not_fitted():
+    """A batch still rendering has (albedo, turbidity) groups with fewer elevations than a Bezier
+    curve needs: those are left at the start values (and said so), the complete groups fitted; a
+    designed grid with too few elevations is still refused (test_bad_inputs_...)."""
+    truth = normalised_truth(hosek_control(), ELEVATIONS_6)
+    directions, omega = sky_directions()
+    elevations = np.concatenate([ELEVATIONS_6, ELEVATIONS_6])
+    albedos = np.repeat([0.0, 1.0], 6)
+    training = synthesize(truth, directions, omega, elevations, np.full(12, 3.0), albedos)
+    radiance = training.radiance[..., [CHANNEL]].copy()
+    radiance[8:] = np.nan                                      # albedo 1: two of six skies rendered so far
+    training = dataclasses.replace(training, channels=(truth.channels[CHANNEL],), radiance=radiance,
+                                   standard_error=training.standard_error[..., [CHANNEL]])
+    result = fit_table(training, joint=False)
+    assert {s: why.split(" (")[0] for s, why in result.skipped.items()} == {
+        **{s: "no valid radiance in some channel" for s in range(8, 12)},
+        6: "too few elevations of its albedo and turbidity rendered", 7: "too few elevations of its albedo and "
+        "turbidity rendered"}
+    assert result.fitted[training.channel_indices[0], :, TURBIDITY].tolist() == [True, False]
+
+
 def test_an_unfinished_batch_is_said_to_be_one():
     """Skies with no data (a batch still rendering) are counted apart in what skyref fit prints,
     so that its error table does not claim the whole grid."""

@@ -371,6 +371,27 @@ def fit_table(training, form: str = "hosek", start: CoefficientTable | None = No
     albedo_index = _grid_indices(training.albedo[skies], ALBEDOS, "albedo")
     turbidity_index = _grid_indices(training.turbidity[skies], TURBIDITIES, "turbidity")
     x = elevation_parameter(training.solar_elevation)
+    # Each (albedo, turbidity) group's Bezier curve needs CONTROL_POINTS elevations: checked before any
+    # work. A group that an unfinished batch leaves short (some of its skies missing) is not fitted.
+    missing = [s for s, why in skipped.items() if why.endswith("(missing sky?)")]
+    short = np.zeros(skies.size, dtype=bool)
+    for a in range(len(ALBEDOS)):
+        for t in range(len(TURBIDITIES)):
+            group = (albedo_index == a) & (turbidity_index == t)
+            if group.any() and np.unique(np.round(x[skies[group]], 12)).size < CONTROL_POINTS:
+                rendered_later = [s for s in missing if np.isclose(training.albedo[s], ALBEDOS[a])
+                                  and np.isclose(training.turbidity[s], TURBIDITIES[t])]
+                if not rendered_later:
+                    raise ParameterError("solar_elevation", sorted(np.degrees(training.solar_elevation[skies[group]])),
+                                         f"at least {CONTROL_POINTS} distinct elevations (deg) per albedo and "
+                                         "turbidity", f"too few for albedo {ALBEDOS[a]:g}, turbidity {TURBIDITIES[t]:g}")
+                short |= group
+                for s in skies[group]:
+                    skipped[int(s)] = "too few elevations of its albedo and turbidity rendered (unfinished batch?)"
+    skies, albedo_index, turbidity_index = skies[~short], albedo_index[~short], turbidity_index[~short]
+    if skies.size == 0:
+        raise ParameterError("training", training.source, f"a group of {CONTROL_POINTS} or more elevations of one "
+                             "albedo and turbidity", "nothing to fit")
 
     timings = {}
     configurations = np.full((len(training.solar_elevation), len(training.channels), n), np.nan)
@@ -391,10 +412,6 @@ def fit_table(training, form: str = "hosek", start: CoefficientTable | None = No
                 members = skies[(albedo_index == a) & (turbidity_index == t)]
                 if members.size == 0:
                     continue
-                if np.unique(np.round(x[members], 12)).size < CONTROL_POINTS:
-                    raise ParameterError("solar_elevation", sorted(np.degrees(training.solar_elevation[members])),
-                                         f"at least {CONTROL_POINTS} distinct elevations (deg) per albedo and "
-                                         "turbidity", f"too few for albedo {ALBEDOS[a]:g}, turbidity {TURBIDITIES[t]:g}")
                 for c in range(len(training.channels)):
                     groups.append((c, a, t, members))
                     p, r = _stage_bezier(form, x[members], configurations[members, c], radiance_scale[members, c])
