@@ -41,9 +41,8 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
 from skyref.analytic.hosek import CHANNELS, published_table  # noqa: E402
 from skyref.audit.metrics import NOISE_RATIO, _statistics  # noqa: E402
-from skyref.batch.provenance import batch_skies, describe_truth, truth_provenance  # noqa: E402
 from skyref.color import default_exposure, tonemap_srgb8  # noqa: E402
-from skyref.fit.cli import FORM_NAMES, noise_line  # noqa: E402
+from skyref.fit.cli import FORM_NAMES, noise_line, truth_metadata  # noqa: E402
 from skyref.fit.evaluate import (error_summary, interpolation_gap, model_radiance, relative_errors,  # noqa: E402
                                  throughput)
 from skyref.fit.export import read_tables  # noqa: E402
@@ -220,13 +219,10 @@ def timing_table(metadata, speeds) -> list[str]:
     return lines
 
 
-def truth_description(dataset) -> str:
-    """The ground truth's estimator, samples and CPU cost, from the batch's EXRs and markers."""
-    return describe_truth(truth_provenance(batch_skies(dataset)))
-
-
 def write_markdown(path, dataset, coefficients, training_sets, results, metadata, speeds, gaps, figures, load):
     any_set = next(iter(training_sets.values()))
+    truth = truth_metadata(any_set)
+    truth_text = "the truth's EXRs are not beside its dataset" if truth is None else truth["description"]
     models = list(MODELS)
     ours = metadata["ours"]
     lines = ["# Hosek–Wilkie fit: skyref's table, the published model and a Perez baseline against the ground truth",
@@ -237,7 +233,7 @@ def write_markdown(path, dataset, coefficients, training_sets, results, metadata
              f"{', '.join(f'{t:g}' for t in np.unique(turbidity(any_set)))}; ground albedo "
              f"{', '.join(f'{a:g}' for a in np.unique(any_set.albedo))}; solar elevation "
              f"{', '.join(f'{e:.2f}' for e in np.unique(elevation_deg(any_set)))} deg; "
-             f"{len(any_set.directions)} view directions at or above the horizon; {truth_description(dataset)}) "
+             f"{len(any_set.directions)} view directions at or above the horizon; {truth_text}) "
              "and the tables in "
              f"`{shown(coefficients)}` (written {ours.get('created', '?')} by skyref "
              f"{ours.get('skyref_version', '?')}, joint refinement {'on' if ours.get('joint_refinement') else 'off'}).",

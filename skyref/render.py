@@ -299,9 +299,8 @@ def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, in
     1/sqrt(spp) law asks for (with a ROUND_MARGIN), rounded to ``passes`` x the nearest power of
     two (so a round is a few launches, one per count; rounding up instead cost 7-15% more CPU on
     the Hosek training skies, pixels ending at 0.83% for a 1% target in the median), within
-    ``max_spp``. The sky's metadata
-    records the mean, smallest and largest samples per pixel, the share of pixels at the
-    target and the 95th percentile of the relative error. A polarized scene (``render.polarized``)
+    ``max_spp``. The sky's metadata records the mean, smallest and largest samples per pixel,
+    the share of pixels at the target and the 95th percentile of the relative error. A polarized scene (``render.polarized``)
     pools every Stokes component and aims at I's error."""
     check_number("target_relative_error", target_relative_error, 1e-5, 1.0)
     passes = scene.render.passes

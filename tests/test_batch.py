@@ -273,3 +273,5 @@ def test_the_truth_says_what_it_is_and_what_it_cost(tmp_path):
                                      "(rendered to an error target), 1.01 CPU hours")
     (tmp_path / "markers" / "sky-001.json").unlink()
     assert truth_provenance(skies)["cpu_s"] is None
+    with pytest.raises(ParameterError, match="truth skies"):
+        truth_provenance(batch_skies(tmp_path / "no-batch-here"))

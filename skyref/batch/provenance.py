@@ -12,6 +12,7 @@ import json
 import os
 
 from skyref.batch.store import marker_of_exr
+from skyref.errors import ParameterError
 from skyref.io.exr import read_sky_exr
 
 __all__ = ["batch_skies", "truth_provenance", "describe_truth"]
@@ -29,6 +30,9 @@ def truth_provenance(exr_paths) -> dict:
     ``camera`` (e.g. "64x32 equirectangular"), ``wavelengths`` (count, first, last, nm), ``spp``
     (the smallest and largest of the skies' mean samples per direction) and ``cpu_s``, the CPU
     seconds the batch spent on them (None if a marker lacks it)."""
+    exr_paths = list(exr_paths)
+    if not exr_paths:
+        raise ParameterError("truth skies", "none", "at least one batch sky EXR", "nothing to describe")
     estimators, spp, cpu = set(), [], 0.0
     for path in exr_paths:
         truth = read_sky_exr(path)

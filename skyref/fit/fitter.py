@@ -358,12 +358,13 @@ def fit_table(training, form: str = "hosek", start: CoefficientTable | None = No
                              "does not match the fit")
     n = len(FORMS[form][0])
     weights = training.weights()
-    skipped = {}
+    skipped, missing = {}, []
     for s in range(len(training.solar_elevation)):
         if training.solar_elevation[s] < 0.0:
             skipped[s] = "sun below the horizon"
         elif not (weights[s] > 0).any(axis=0).all():
             skipped[s] = "no valid radiance in some channel (missing sky?)"
+            missing.append(s)
     skies = np.array([s for s in range(len(training.solar_elevation)) if s not in skipped], dtype=int)
     if skies.size == 0:
         raise ParameterError("training", training.source, "at least one sky with the sun above the horizon",
@@ -373,7 +374,6 @@ def fit_table(training, form: str = "hosek", start: CoefficientTable | None = No
     x = elevation_parameter(training.solar_elevation)
     # Each (albedo, turbidity) group's Bezier curve needs CONTROL_POINTS elevations: checked before any
     # work. A group that an unfinished batch leaves short (some of its skies missing) is not fitted.
-    missing = [s for s, why in skipped.items() if why.endswith("(missing sky?)")]
     short = np.zeros(skies.size, dtype=bool)
     for a in range(len(ALBEDOS)):
         for t in range(len(TURBIDITIES)):
