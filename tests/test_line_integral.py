@@ -355,6 +355,34 @@ def test_line_integral_matches_delta_tracking(mi):
     assert np.all(np.abs(z) < 4.0), z
 
 
+def test_line_integral_matches_delta_tracking_over_a_wide_spectrum_and_a_white_ground(mi):
+    """Where the forced collisions' proxy mixture matters (ProxyMixture: 360 nm scatters ~20x
+    more than 760 nm, and a white ground keeps paths alive for tens of vertices): turbidity 3,
+    ground albedo 1, sun zenith 63, 360 / 560 / 760 nm, all orders, along the zenith, 60 deg
+    and the horizon. The two independent estimators agree within |z| < 4 per view and channel,
+    at < 0.6% relative standard error each (a 3% bias would show)."""
+    import dataclasses
+
+    import skyref.atmosphere as atm
+    from skyref.render import build_integrator
+    from skyref.scene import RenderSettings, Scene, Sun, direction_from_angles
+
+    atmosphere = dataclasses.replace(atm.from_turbidity(3.0), ground_albedo=1.0)
+    views = np.array([direction_from_angles(z, a) for z, a in [(0.0, 0.0), (60.0, 90.0), (90.0, 180.0)]])
+    estimates = []
+    for estimator, spp in (("line_integral", 8000), ("delta_tracking", 60_000)):
+        scene = Scene(atmosphere=atmosphere, sun=Sun(63.0, 0.0), wavelengths=[360.0, 560.0, 760.0],
+                      render=RenderSettings(estimator=estimator))
+        x = build_integrator(scene).render_directions(views, seed=5, spp=spp, batches=16).numpy().sum(axis=2)
+        estimates.append((x.mean(axis=0), x.std(axis=0, ddof=1) / 4.0))
+    (a, se_a), (b, se_b) = estimates
+    z = (a - b) / np.hypot(se_a, se_b)
+    print(f"line integral vs delta tracking: max |z| {np.max(np.abs(z)):.2f}, rel. se "
+          f"{np.max(se_a / a):.2%} / {np.max(se_b / b):.2%}")
+    assert np.all(se_a / a < 6e-3) and np.all(se_b / b < 6e-3)
+    assert np.all(np.abs(z) < 4.0), z
+
+
 def test_camera_light_traced_apart_matches_whole_paths(mi):
     """With a fixed camera direction the solar disk and single scattering are traced in their own
     launch and the paths carry orders >= 2 only (render_directions); whole paths, as for pixels

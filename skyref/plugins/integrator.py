@@ -103,7 +103,7 @@ from skyref.errors import ParameterError
 from skyref.plugins.drjit_namespace import channel_mean, xp
 from skyref.plugins.geometry import PlaneParallelSlab, SphericalShell
 from skyref.plugins.guiding import SingleScatteringGuide
-from skyref.plugins.line_integral import GreyProxy, LineIntegral
+from skyref.plugins.line_integral import GreyProxy, LineIntegral, ProxyMixture
 from skyref.plugins.optics import AtmosphereOptics, atmosphere_from_property, direction_with_cosine
 from skyref.plugins.polarization import STOKES, StokesPath, stokes_times, unpolarized
 from skyref.plugins.quadrature import panel_levels
@@ -686,10 +686,10 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         stokes = StokesPath.camera(d, self.geometry.up(mi.Point3f(origin)), channels.count) if self.polarized else None
 
         goes_on = orders != "single" and self.max_depth > 1
-        light, sun_disk, path, stokes = self._line_segment(sampler, channels, e_sun, camera, stokes, camera=True,
-                                                           rising_only=self.geometry.h0 == 0.0,
-                                                           sunlight=None if orders == "multiple" else "quadrature",
-                                                           goes_on=goes_on)
+        light, sun_disk, path, stokes, _ = self._line_segment(sampler, channels, e_sun, camera, stokes, camera=True,
+                                                              rising_only=self.geometry.h0 == 0.0,
+                                                              sunlight=None if orders == "multiple" else "quadrature",
+                                                              goes_on=goes_on)
         radiance.direct += sun_disk
         radiance.single += light
         if goes_on:
@@ -704,10 +704,12 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         polarized, else None) that goes on from its first vertex (depth 1), added to
         ``radiance``: one loop iteration per segment."""
         path.alive &= path.depth < self.max_depth
+        proxy_weights = ProxyMixture.prior()
 
         while dr.hint(path.alive, label="atmosphere line-integral path"):
-            light, _, path, stokes = self._line_segment(sampler, channels, e_sun, path, stokes, camera=False,
-                                                        rising_only=False, sunlight="sampled")
+            light, _, path, stokes, proxy_weights = self._line_segment(
+                sampler, channels, e_sun, path, stokes, camera=False, rising_only=False, sunlight="sampled",
+                proxy_weights=proxy_weights)
             radiance.file(path.depth, light, True)      # scattered (or reflected) path.depth times
             # Russian roulette once the largest channel throughput falls below LINE_ROULETTE_THROUGHPUT
             survival = dr.minimum(dr.max(dr.detach(path.throughput), axis=0) / LINE_ROULETTE_THROUGHPUT, 1.0)
@@ -717,13 +719,16 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             path.alive &= ~(roulette & ~survives) & (path.depth < self.max_depth)
 
     def _line_segment(self, sampler, channels, e_sun, path, stokes, camera, rising_only, sunlight="quadrature",
-                      goes_on=True):
+                      goes_on=True, proxy_weights=None):
         """One segment of a line-integral ``path`` (a :class:`PathVertex`, with its
         :class:`StokesPath` ``stokes`` when polarized, else None) from its vertex along its
         direction. Returns (the light gathered along the segment: sunlight scattered once on it,
         or reflected by the ground at its end, so path.depth + 1 events: radiance, or Stokes
         vectors; the solar disk seen through it when ``camera``; the path at its next vertex,
-        one event deeper; its StokesPath there). ``sunlight``:
+        one event deeper; its StokesPath there; ``proxy_weights`` after the vertex). The next
+        vertex is drawn by the path's :class:`GreyProxy`, or with ``proxy_weights`` (the
+        posterior probabilities of :class:`ProxyMixture`, on segments whose sunlight is not by
+        quadrature) by the mixture. ``sunlight``:
         the segment's scattered sunlight by ``"quadrature"`` or ``"sampled"`` at
         ``SAMPLED_SUNLIGHT_POINTS`` points (:meth:`LineIntegral.sampled_sunlight`), or None: not
         computed (the light is 0), only where the path goes on. ``goes_on`` False: the path
@@ -735,9 +740,11 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         on_ground = t_ground < t_top
         length = dr.select(on_ground, t_ground, t_top)
         sun_direction, sun_factor = sun.sample_direction(sampler.next_2d())
-        grey = GreyProxy(channels, throughput)
+        proxy = GreyProxy(channels, throughput) if proxy_weights is None else ProxyMixture(channels, throughput,
+                                                                                           proxy_weights)
         scattered, transmittance, quadrature = self.line.integrate(
-            channels, p, d, h, length, sun_direction, grey, rising_only, sunlight)
+            channels, p, d, h, length, sun_direction, proxy, rising_only, sunlight)
+        quadrature, ground_mass, mixture = proxy.mix(quadrature, on_ground)
         ground = p + length * d
         up = geometry.up(ground)
         light, sun_disk = channels.zeros(self.stokes), channels.zeros()
@@ -767,10 +774,9 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             light = dr.select(alive, light, 0.0)
 
         if not goes_on:
-            return light, sun_disk, None, stokes
+            return light, sun_disk, None, stokes, proxy_weights
         # -- where the path goes on: a forced collision in the air, or the ground --------------------
         air_mass = sum(quadrature.masses, mi.Float(0.0))
-        ground_mass = dr.select(on_ground, grey.transmittance(quadrature.total) * grey.albedo, 0.0)
         p_air = air_mass / dr.maximum(air_mass + ground_mass, 1e-30)
         alive &= (air_mass + ground_mass) > 0.0
         # One decision places the next vertex and turns the path there: (where, cos, azimuth);
@@ -778,7 +784,9 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         vertex_sample = sampler.next_3d()
         in_air = vertex_sample.x < p_air
         u_air = dr.minimum(vertex_sample.x / dr.maximum(p_air, 1e-30), 1.0 - 2.0 ** -24)
-        x, hx, weight, (parts, sigma_s, _) = self.line.sample_collision(channels, quadrature, p, d, u_air)
+        x, hx, weight, (parts, sigma_s, _), panel = self.line.sample_collision(channels, quadrature, p, d, u_air)
+        if proxy_weights is not None:
+            proxy_weights = ProxyMixture.posterior(mixture, quadrature, ground_mass, panel, in_air)
         u_direction = mi.Point2f(vertex_sample.y, vertex_sample.z)
         d_air, phase_weight = self._scatter_direction(parts, sigma_s, d, x, hx, sampler.next_1d(), u_direction)
         if self.polarized:
@@ -792,7 +800,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         next_vertex = PathVertex(dr.select(in_air, x, ground), dr.select(in_air, hx, 0.0),
                                  dr.select(in_air, d_air, d_ground),
                                  dr.select(in_air, air_throughput, ground_throughput), path.depth + 1, alive)
-        return light, sun_disk, next_vertex, stokes
+        return light, sun_disk, next_vertex, stokes, proxy_weights
 
     def _scatter_direction(self, parts, sigma_s, d, point, altitude, u_choice, u_direction):
         """The direction a line-integral path takes at a scattering event (incident direction d,
