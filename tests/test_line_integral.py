@@ -332,6 +332,17 @@ def test_sampled_sunlight_matches_a_float64_reference(mi, case):
 # --- the whole estimator against delta tracking ------------------------------------------------------
 
 
+def assert_estimators_agree(estimates, relative_se):
+    """Two estimators' (mean, standard error) over the same views and channels, each at a
+    relative standard error below ``relative_se``, agree within |z| < 4 everywhere."""
+    (a, se_a), (b, se_b) = estimates
+    z = (a - b) / np.hypot(se_a, se_b)
+    print(f"line integral vs delta tracking: max |z| {np.max(np.abs(z)):.2f}, rel. se "
+          f"{np.max(se_a / a):.2%} / {np.max(se_b / b):.2%}")
+    assert np.all(se_a / a < relative_se) and np.all(se_b / b < relative_se)
+    assert np.all(np.abs(z) < 4.0), z
+
+
 def test_line_integral_matches_delta_tracking(mi):
     """Clear sky, sun zenith 60, black-to-0.1 ground, all orders: the two independent estimators
     agree within |z| < 4 per view and channel, at < 0.25% relative standard error each."""
@@ -347,12 +358,7 @@ def test_line_integral_matches_delta_tracking(mi):
     for integ, spp in ((line, 2000), (tracking, 48_000)):
         x = integ.render_directions(views, seed=11, spp=spp, batches=16).numpy().sum(axis=2)   # (16, M, N)
         estimates.append((x.mean(axis=0), x.std(axis=0, ddof=1) / 4.0))
-    (a, se_a), (b, se_b) = estimates
-    z = (a - b) / np.hypot(se_a, se_b)
-    print(f"line integral vs delta tracking: max |z| {np.max(np.abs(z)):.2f}, rel. se "
-          f"{np.max(se_a / a):.2%} / {np.max(se_b / b):.2%}")
-    assert np.all(se_a / a < 2.5e-3) and np.all(se_b / b < 2.5e-3)
-    assert np.all(np.abs(z) < 4.0), z
+    assert_estimators_agree(estimates, 2.5e-3)
 
 
 def test_line_integral_matches_delta_tracking_over_a_wide_spectrum_and_a_white_ground(mi):
@@ -375,12 +381,7 @@ def test_line_integral_matches_delta_tracking_over_a_wide_spectrum_and_a_white_g
                       render=RenderSettings(estimator=estimator))
         x = build_integrator(scene).render_directions(views, seed=5, spp=spp, batches=16).numpy().sum(axis=2)
         estimates.append((x.mean(axis=0), x.std(axis=0, ddof=1) / 4.0))
-    (a, se_a), (b, se_b) = estimates
-    z = (a - b) / np.hypot(se_a, se_b)
-    print(f"line integral vs delta tracking: max |z| {np.max(np.abs(z)):.2f}, rel. se "
-          f"{np.max(se_a / a):.2%} / {np.max(se_b / b):.2%}")
-    assert np.all(se_a / a < 6e-3) and np.all(se_b / b < 6e-3)
-    assert np.all(np.abs(z) < 4.0), z
+    assert_estimators_agree(estimates, 6e-3)
 
 
 def test_camera_light_traced_apart_matches_whole_paths(mi):
