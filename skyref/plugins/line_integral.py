@@ -85,9 +85,13 @@ def grey_sum(grey, per_constituent):
     return sum((g * x for g, x in zip(grey, per_constituent) if g is not None), mi.Float(0.0))
 
 
-def _loss(thickness):
-    """(1 - e^-K) / K of a panel of optical thickness K, which tends to 1 as K -> 0."""
-    return dr.select(thickness > 1e-3, (1.0 - dr.exp(-thickness)) / thickness, 1.0 - 0.5 * thickness)
+def _mean_transmittance(coefficients, start, depth):
+    """T(a) (1 - e^-K) / K for a panel of optical thickness K = sum_c k_c depth_c beginning at
+    optical depth sum_c k_c start_c (grey coefficients k_c per constituent): the panel's mean
+    transmittance, T(a) - T(b) over K, which tends to T(a) as K -> 0."""
+    thickness = grey_sum(coefficients, depth)
+    loss = dr.select(thickness > 1e-3, (1.0 - dr.exp(-thickness)) / thickness, 1.0 - 0.5 * thickness)
+    return dr.exp(-grey_sum(coefficients, start)) * loss
 
 
 class GreyProxy:
@@ -113,10 +117,8 @@ class GreyProxy:
         (``start``) and across it (``depth``), with the grey albedo taken as constant across
         the panel: for each of the proxy's two transmittances, (scattering depth / extinction
         depth) x (T(a) - T(b)). Positive wherever the panel scatters."""
-        mass = mi.Float(0.0)
-        for coefficients in (self.extinction, self.least):
-            mass += dr.exp(-grey_sum(coefficients, start)) * _loss(grey_sum(coefficients, depth))
-        return dr.detach(0.5 * grey_sum(self.scattering, depth) * mass)
+        mean = _mean_transmittance(self.extinction, start, depth) + _mean_transmittance(self.least, start, depth)
+        return dr.detach(0.5 * grey_sum(self.scattering, depth) * mean)
 
     def ground_mass(self, total):
         """The ground's sampling mass at the end of a segment of per-constituent unit optical
@@ -138,14 +140,12 @@ class OpaqueProxy(GreyProxy):
         self.scattering = [None if s is None else dr.detach(dr.max(s, axis=0)) for s, _ in channels.coefficients]
         self.extinction = channels.bounds
         self.albedo = dr.detach(dr.max(channels.albedo, axis=0))
-        self.least = channels.least
 
     def transmittance(self, unit_depths):
         return dr.exp(-grey_sum(self.extinction, unit_depths))
 
     def panel_mass(self, start, depth):
-        return dr.detach(grey_sum(self.scattering, depth) * dr.exp(-grey_sum(self.extinction, start))
-                         * _loss(grey_sum(self.extinction, depth)))
+        return dr.detach(grey_sum(self.scattering, depth) * _mean_transmittance(self.extinction, start, depth))
 
 
 class ProxyMixture:
