@@ -364,9 +364,9 @@ def test_line_integral_matches_delta_tracking(mi):
 def test_line_integral_matches_delta_tracking_over_a_wide_spectrum_and_a_white_ground(mi):
     """Where the forced collisions' proxy mixture matters (ProxyMixture: 360 nm scatters ~20x
     more than 760 nm, and a white ground keeps paths alive for tens of vertices): turbidity 3,
-    ground albedo 1, sun zenith 63, 360 / 560 / 760 nm, all orders, along the zenith, 60 deg
-    and the horizon. The two independent estimators agree within |z| < 4 per view and channel,
-    at < 0.6% relative standard error each (a 3% bias would show)."""
+    ground albedo 1, sun zenith 63, 360 / 560 / 760 nm, all orders, along the zenith and the
+    horizon. The two independent estimators agree within |z| < 4 per view and channel,
+    at < 0.17% relative standard error each (so that a 1% bias would show)."""
     import dataclasses
 
     import skyref.atmosphere as atm
@@ -374,14 +374,14 @@ def test_line_integral_matches_delta_tracking_over_a_wide_spectrum_and_a_white_g
     from skyref.scene import RenderSettings, Scene, Sun, direction_from_angles
 
     atmosphere = dataclasses.replace(atm.from_turbidity(3.0), ground_albedo=1.0)
-    views = np.array([direction_from_angles(z, a) for z, a in [(0.0, 0.0), (60.0, 90.0), (90.0, 180.0)]])
+    views = np.array([direction_from_angles(z, a) for z, a in [(0.0, 0.0), (90.0, 180.0)]])
     estimates = []
-    for estimator, spp in (("line_integral", 8000), ("delta_tracking", 60_000)):
+    for estimator, spp in (("line_integral", 320_000), ("delta_tracking", 300_000)):
         scene = Scene(atmosphere=atmosphere, sun=Sun(63.0, 0.0), wavelengths=[360.0, 560.0, 760.0],
                       render=RenderSettings(estimator=estimator))
         x = build_integrator(scene).render_directions(views, seed=5, spp=spp, batches=16).numpy().sum(axis=2)
         estimates.append((x.mean(axis=0), x.std(axis=0, ddof=1) / 4.0))
-    assert_estimators_agree(estimates, 6e-3)
+    assert_estimators_agree(estimates, 1.7e-3)
 
 
 def test_camera_light_traced_apart_matches_whole_paths(mi):
