@@ -4,8 +4,10 @@ against MYSTIC's, direction by direction, with their combined standard errors (t
 set up and what is not, the conventions).
 
 Per setting (case, depolarization, output level, sun): skyref's relative standard error of I
-is sized to ``TARGET`` per direction (64 batches); 99% of the z-scores must be within 3, the
-mean z of I within 4 / sqrt(directions) of 0 (a bias common to a setting), and every z-score
+is sized to ``TARGET`` per direction (64 batches); 99% of the z-scores must be within 3 (on
+the CI subset's few dozen z-scores per setting, that count may reach the 99.9th percentile of
+its binomial law: 2 of 54, where "at most 1" alone was a 1% false alarm per setting, ~40% over
+the 48 settings), the mean z of I within 4 / sqrt(directions) of 0 (a bias common to a setting), and every z-score
 within ``max_z``: 4 on the CI subset (~900 z-scores: a 6% chance of one false alarm for a
 given set of seeds if both codes were exact), and on every direction (~40,000 z-scores, where
 normal statistics alone put a few beyond 4) the bound that one exact z-score in 100 such runs
@@ -28,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.stats import binom
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # `tests.references` under plain pytest
 
@@ -43,6 +46,13 @@ def _ci_rows(rows):
     return rows[(rows[:, 4] % 30 == 0) & (rows[:, 5] % 60 == 0) & (rows[:, 5] < 360)]
 
 
+def allowed_beyond_3(compared: int) -> int:
+    """How many of ``compared`` z-scores may exceed 3 in magnitude: 1% of them (the issue's
+    "99% within 3"), or the 99.9th percentile of the count for exact codes (binomial,
+    p = 0.0027), whichever is larger."""
+    return max(int(0.01 * compared), int(binom.ppf(0.999, compared, 0.0027)))
+
+
 def _check(setting, rows, target, max_z, estimator="line_integral"):
     mean, se, _ = iprt.estimate(setting, rows, target, estimator=estimator)
     z = iprt.z_scores(mean, se, rows)
@@ -54,7 +64,8 @@ def _check(setting, rows, target, max_z, estimator="line_integral"):
     assert np.all(mean[~lit] == 0.0), "light where MYSTIC has none\n" + message
     assert np.all(se[lit, 0] <= target * mean[lit, 0]), "standard error above target\n" + message
     assert np.all(np.abs(z) <= max_z), "skyref and MYSTIC disagree\n" + message
-    assert np.mean(np.abs(z[lit]) > 3.0) <= 0.01 or np.sum(np.abs(z[lit]) > 3.0) <= 1, "too many |z| > 3\n" + message
+    compared = z[lit] != 0.0                     # not the components both codes have exactly 0
+    assert np.sum(np.abs(z[lit]) > 3.0) <= allowed_beyond_3(np.sum(compared)), "too many |z| > 3\n" + message
     assert abs(z[lit, 0].mean()) <= 4.0 / math.sqrt(lit.sum()), "common bias in I\n" + message
 
 

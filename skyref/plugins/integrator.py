@@ -14,7 +14,8 @@ so that every path scatters; on the path's later segments the scattered sunlight
 sun lookup each, where the quadrature pays one per node), so orders >= 2 stay unbiased Monte
 Carlo, drawn from scrambled Sobol points (:mod:`skyref.plugins.sobol`), with a sun lobe among
 the scattering directions where there is aerosol and a guide towards where the single-scattered
-light comes from (:mod:`skyref.plugins.guiding`). For a fixed camera direction the camera
+light comes from (:mod:`skyref.plugins.guiding`), that mixture itself mixed over the whole path
+with the phase function alone (:class:`PathSampling`). For a fixed camera direction the camera
 segment's light is traced apart, once per few paths. Its quadrature is within 1e-4 of a refined
 one (tests/test_line_integral.py) on clear and hazy skies up to the horizon, with a low sun's
 finite disk and at twilight (sun zenith 92-100 deg, where the panels also split at the points
@@ -163,6 +164,27 @@ SUN_LOBE_PROBABILITY = 0.2
 #: twilight (96 deg), unchanged on the hazy sky (turbidity 6); 0.3 and 0.7 did no better.
 GUIDE_PROBABILITY = 0.5
 
+#: Prior probability that a line-integral path draws its directions, from its second vertex on,
+#: by the guided mixture (guide, sun lobe, phase function) rather than by the phase function
+#: alone; the two are combined by the balance heuristic over the whole path
+#: (:class:`PathSampling`). With the mixture at every vertex, a direction the phase function
+#: drew weighs phase / pdf up to 1 / (1 - guide - sun lobe probabilities), and along the long
+#: paths of hazy air these factors multiply. Per-sample variance of orders >= 2, 2^17-2^19 paths
+#: per direction, mixture at every vertex -> this prior: hazy sky (turbidity 6, sun zenith 60,
+#: RGB 680 / 550 / 440 nm) 1.96 / 2.30 / 4.72 -> 1.76 / 1.92 / 3.38 at view zenith 85, 1.20 /
+#: 0.98 / 1.11 -> 1.04 / 0.86 / 0.99 at 60, the same at the zenith; Hosek training skies at 360 nm
+#: (21 wavelengths): turbidity 6, albedo 0, sun zenith 52: 82.6 -> 15.8 (view zenith 85), 3.14 ->
+#: 1.95 (60); turbidity 6, albedo 1, sun 88.6: 23.4 -> 11.2 (89), 6.48 -> 2.77 (60); clear and
+#: sunset skies within -5..+4%; 0.7 and 0.3 no better. At no extra CPU. Not at twilight
+#: (``TWILIGHT_GUIDED_PATH_PRIOR``).
+GUIDED_PATH_PRIOR = 0.5
+
+#: The prior where the sun is below the observer's horizon (sun zenith > 90 deg): there the
+#: light of every order comes from the lit air low over the sun's azimuth, which the guide aims
+#: at, at every vertex. Measured (sun zenith 96, RGB, prior 0.5 against 1): per-sample variance
+#: of orders >= 2 at 440 nm 7.4 -> 11.8 at the zenith, 10.4 -> 12.7 at the horizon.
+TWILIGHT_GUIDED_PATH_PRIOR = 1.0
+
 #: Most samples (lanes) one launch traces: bounds the path state (~100 bytes per sample and
 #: channel). Fewer, larger launches pay the Python tracing of the kernel once.
 MAX_WAVEFRONT = 1 << 21
@@ -191,6 +213,19 @@ class PathVertex:
     def __init__(self, point=None, altitude=None, direction=None, throughput=None, depth=None, alive=None):
         self.point, self.altitude, self.direction = point, altitude, direction
         self.throughput, self.depth, self.alive = throughput, depth, alive
+
+
+class PathSampling:
+    """What a line-integral path remembers of how it was sampled, from its second vertex on, for
+    the balance heuristic over the whole path: the posterior probabilities of the forced
+    collisions' two proxies (``proxy_weights``, :class:`ProxyMixture`) and the posterior
+    probability that its directions were drawn by the guided mixture rather than by the phase
+    function alone (``guided``, :meth:`AtmosphereIntegrator._scatter_direction`)."""
+
+    DRJIT_STRUCT = {"proxy_weights": mi.ArrayXf, "guided": mi.Float}
+
+    def __init__(self, proxy_weights=None, guided=None):
+        self.proxy_weights, self.guided = proxy_weights, guided
 
 
 class RadianceByOrder:
@@ -343,6 +378,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         # inside the path's symbolic loop, broke forward-mode AD through it (Dr.Jit 1.5:
         # "derivatives across an edge outside of the current dr.isolate_grad() scope")
         self.sun_lobe_g = self._sun_lobe_g(atmosphere)
+        self.guided_path_prior = TWILIGHT_GUIDED_PATH_PRIOR if sun_zenith_deg > 90.0 else GUIDED_PATH_PRIOR
         #: Altitude over which one majorant of the delta tracking holds (the smallest scale height
         #: of an exponential profile; inf: the whole segment).
         self.majorant_drop = min((float(c.profile.scale_height_m) for c in atmosphere.constituents
@@ -704,12 +740,13 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         polarized, else None) that goes on from its first vertex (depth 1), added to
         ``radiance``: one loop iteration per segment."""
         path.alive &= path.depth < self.max_depth
-        proxy_weights = ProxyMixture.prior()
+        # opaque: a sky at twilight and one by day share their kernels
+        sampling = PathSampling(ProxyMixture.prior(), dr.opaque(mi.Float, self.guided_path_prior, dr.width(path.alive)))
 
         while dr.hint(path.alive, label="atmosphere line-integral path"):
-            light, _, path, stokes, proxy_weights = self._line_segment(
+            light, _, path, stokes, sampling = self._line_segment(
                 sampler, channels, e_sun, path, stokes, camera=False, rising_only=False, sunlight="sampled",
-                proxy_weights=proxy_weights)
+                sampling=sampling)
             radiance.file(path.depth, light, True)      # scattered (or reflected) path.depth times
             # Russian roulette once the largest channel throughput falls below LINE_ROULETTE_THROUGHPUT
             survival = dr.minimum(dr.max(dr.detach(path.throughput), axis=0) / LINE_ROULETTE_THROUGHPUT, 1.0)
@@ -719,16 +756,17 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             path.alive &= ~(roulette & ~survives) & (path.depth < self.max_depth)
 
     def _line_segment(self, sampler, channels, e_sun, path, stokes, camera, rising_only, sunlight="quadrature",
-                      goes_on=True, proxy_weights=None):
+                      goes_on=True, sampling=None):
         """One segment of a line-integral ``path`` (a :class:`PathVertex`, with its
         :class:`StokesPath` ``stokes`` when polarized, else None) from its vertex along its
         direction. Returns (the light gathered along the segment: sunlight scattered once on it,
         or reflected by the ground at its end, so path.depth + 1 events: radiance, or Stokes
         vectors; the solar disk seen through it when ``camera``; the path at its next vertex,
-        one event deeper; its StokesPath there; ``proxy_weights`` after the vertex). The next
-        vertex is drawn by the path's :class:`GreyProxy`, or with ``proxy_weights`` (the
-        posterior probabilities of :class:`ProxyMixture`, on segments whose sunlight is not by
-        quadrature) by the mixture. ``sunlight``:
+        one event deeper; its StokesPath there; its :class:`PathSampling` after the vertex). Where
+        ``sampling`` is None (the camera segment), the next vertex is drawn by the path's
+        :class:`GreyProxy` and its direction by the guided mixture; else by :class:`ProxyMixture`
+        and the mixture of the guided directions with the phase function's, with the posterior
+        probabilities ``sampling`` holds. ``sunlight``:
         the segment's scattered sunlight by ``"quadrature"`` or ``"sampled"`` at
         ``SAMPLED_SUNLIGHT_POINTS`` points (:meth:`LineIntegral.sampled_sunlight`), or None: not
         computed (the light is 0), only where the path goes on. ``goes_on`` False: the path
@@ -740,8 +778,8 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         on_ground = t_ground < t_top
         length = dr.select(on_ground, t_ground, t_top)
         sun_direction, sun_factor = sun.sample_direction(sampler.next_2d())
-        proxy = GreyProxy(channels, throughput) if proxy_weights is None else ProxyMixture(channels, throughput,
-                                                                                           proxy_weights)
+        proxy = GreyProxy(channels, throughput) if sampling is None else ProxyMixture(channels, throughput,
+                                                                                      sampling.proxy_weights)
         scattered, transmittance, quadrature = self.line.integrate(
             channels, p, d, h, length, sun_direction, proxy, rising_only, sunlight)
         quadrature, ground_mass, mixture = proxy.mix(quadrature, on_ground)
@@ -774,7 +812,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             light = dr.select(alive, light, 0.0)
 
         if not goes_on:
-            return light, sun_disk, None, stokes, proxy_weights
+            return light, sun_disk, None, stokes, sampling
         # -- where the path goes on: a forced collision in the air, or the ground --------------------
         air_mass = sum(quadrature.masses, mi.Float(0.0))
         p_air = air_mass / dr.maximum(air_mass + ground_mass, 1e-30)
@@ -785,10 +823,12 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         in_air = vertex_sample.x < p_air
         u_air = dr.minimum(vertex_sample.x / dr.maximum(p_air, 1e-30), 1.0 - 2.0 ** -24)
         x, hx, weight, (parts, sigma_s, _), panel = self.line.sample_collision(channels, quadrature, p, d, u_air)
-        if proxy_weights is not None:
-            proxy_weights = ProxyMixture.posterior(mixture, quadrature, ground_mass, panel, in_air)
         u_direction = mi.Point2f(vertex_sample.y, vertex_sample.z)
-        d_air, phase_weight = self._scatter_direction(parts, sigma_s, d, x, hx, sampler.next_1d(), u_direction)
+        d_air, phase_weight, guided = self._scatter_direction(parts, sigma_s, d, x, hx, sampler.next_1d(), u_direction,
+                                                              None if sampling is None else sampling.guided)
+        if sampling is not None:
+            sampling = PathSampling(ProxyMixture.posterior(mixture, quadrature, ground_mass, panel, in_air),
+                                    dr.select(in_air, guided, sampling.guided))
         if self.polarized:
             _, reduced = self.optics.phase_matrix(parts, sigma_s, dr.clip(dr.dot(d, d_air), -1.0, 1.0))
             stokes, factor = stokes.scatter(d_air, d, reduced, in_air)
@@ -800,12 +840,13 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         next_vertex = PathVertex(dr.select(in_air, x, ground), dr.select(in_air, hx, 0.0),
                                  dr.select(in_air, d_air, d_ground),
                                  dr.select(in_air, air_throughput, ground_throughput), path.depth + 1, alive)
-        return light, sun_disk, next_vertex, stokes, proxy_weights
+        return light, sun_disk, next_vertex, stokes, sampling
 
-    def _scatter_direction(self, parts, sigma_s, d, point, altitude, u_choice, u_direction):
+    def _scatter_direction(self, parts, sigma_s, d, point, altitude, u_choice, u_direction, guided_share=None):
         """The direction a line-integral path takes at a scattering event (incident direction d,
-        at ``point`` and ``altitude``) and its weight p / pdf per channel. ``u_choice`` picks one
-        of three ways to draw it:
+        at ``point`` and ``altitude``), its weight p / pdf per channel, and the posterior
+        probability that the path's directions so far were drawn by the guided mixture.
+        ``u_choice`` picks one of three ways to draw it:
 
         * with probability alpha = ``GUIDE_PROBABILITY`` x the local share of the scattering
           without a forward peak (Rayleigh's), from the :class:`SingleScatteringGuide`: towards
@@ -821,13 +862,22 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         The pdf is the mixture of the three (one-sample MIS, balance heuristic). The guide's share
         follows the local mixture because an aerosol's forward peak is what carries light through
         hazy air: guided with a fixed probability of 0.5, the variance of orders >= 3 on the hazy
-        sky (turbidity 6) grew 4x."""
+        sky (turbidity 6) grew 4x.
+
+        From the path's second vertex on, that guided mixture is itself mixed with the phase
+        function alone by the balance heuristic over the whole path: ``guided_share`` (None: 1)
+        is the posterior probability c of the guided mixture q given the path so far, so the
+        direction is drawn by c q + (1 - c) p_phase (alpha and beta scaled by c) and afterwards
+        c <- c q / (c q + (1 - c) p_phase). The product of the MIS weights along the path then
+        stays below 1 / (1 - c_prior) times the phase function's own (``GUIDED_PATH_PRIOR``)."""
         optics, guide = self.optics, self.guide.at(self.geometry.up(point), altitude)
         g = self.sun_lobe_g
         lobe = g > 0.0
         rayleigh_share = optics.share_without_forward_peak(parts, sigma_s)
-        alpha = GUIDE_PROBABILITY * rayleigh_share
-        beta = SUN_LOBE_PROBABILITY * (1.0 - rayleigh_share) if lobe else 0.0
+        guided_alpha = GUIDE_PROBABILITY * rayleigh_share
+        guided_beta = SUN_LOBE_PROBABILITY * (1.0 - rayleigh_share) if lobe else 0.0
+        share = mi.Float(1.0) if guided_share is None else dr.detach(guided_share)
+        alpha, beta = share * guided_alpha, share * guided_beta
         guided = u_choice < alpha
         u_phase = dr.clip((u_choice - alpha - beta) / dr.maximum(1.0 - alpha - beta, 1e-30), 0.0, 1.0)
         mu_phase, _ = optics.sample_phase(parts, sigma_s, u_phase, u_direction.x)
@@ -839,10 +889,11 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         direction = dr.select(guided, guide.sample(u_choice / dr.maximum(alpha, 1e-30), u_direction.x, u_direction.y),
                               direction)
         mu = dr.clip(dr.dot(d, direction), -1.0, 1.0)
-        pdf = (1.0 - alpha - beta) * optics.phase_pdf(parts, sigma_s, mu) + alpha * guide.pdf(direction)
-        if lobe:
-            pdf += beta * henyey_greenstein_phase(dr.dot(self.sun.direction, direction), g, xp)
-        return direction, optics.phase(parts, sigma_s, mu) / pdf
+        phase_pdf, guide_pdf = optics.phase_pdf(parts, sigma_s, mu), guide.pdf(direction)
+        lobe_pdf = henyey_greenstein_phase(dr.dot(self.sun.direction, direction), g, xp) if lobe else 0.0
+        guided_pdf = (1.0 - guided_alpha - guided_beta) * phase_pdf + guided_alpha * guide_pdf + guided_beta * lobe_pdf
+        pdf = share * guided_pdf + (1.0 - share) * phase_pdf
+        return direction, optics.phase(parts, sigma_s, mu) / pdf, dr.detach(share * guided_pdf * dr.rcp(pdf))
 
     @dr.syntax
     def _trace_delta_tracking(self, sampler, origin, direction, indices, active):
