@@ -165,7 +165,11 @@ def test_forward_derivative_matches_finite_difference_slow(mi, integ, name):
 #: Samples per direction and seed, and seeds, of each estimator: the standard error of the
 #: difference is 0.04% (ground albedo) to 0.19% (ozone, g) of the derivative on each parameter's
 #: best-determined element (measured on the CI parameters), so a bias of 0.8% fails (|z| < 4).
-LINE_INTEGRAL_SPP, LINE_INTEGRAL_SEEDS = 1024, 8
+#: The line integral's samples are spread over 32 seeds (31 degrees of freedom for its standard
+#: error; it had 8 x 1024): its derivatives are heavy-tailed (aerosol g, view zenith 85: 8-seed
+#: blocks of the same run gave max |z| 1.2-4.4), and with 7 degrees of freedom |t| > 4 alone is a
+#: 0.5% chance per element.
+LINE_INTEGRAL_SPP, LINE_INTEGRAL_SEEDS = 256, 32
 DELTA_TRACKING_SPP, DELTA_TRACKING_SEEDS = 32768, 32
 
 #: Checked in CI (an absorber, a phase function, the ground); the slow tier checks every parameter
