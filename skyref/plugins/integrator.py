@@ -778,10 +778,11 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         or reflected by the ground at its end, so path.depth + 1 events: radiance, or Stokes
         vectors; the solar disk seen through it when ``camera``; the path at its next vertex,
         one event deeper; its StokesPath there; its :class:`PathSampling` after the vertex). Where
-        ``sampling`` is None (the camera segment), the next vertex is drawn by the path's
-        :class:`GreyProxy` and its direction by the guided mixture; else by :class:`ProxyMixture`
-        and the mixture of the guided directions with the phase function's, with the posterior
-        probabilities ``sampling`` holds. ``sunlight``:
+        ``sampling`` is None (a camera segment whose single scattering is integrated here, or one
+        at twilight), the next vertex is drawn by the path's :class:`GreyProxy` and its direction
+        by the guided mixture; else by :class:`ProxyMixture` and the mixture of the guided
+        directions with the phase function's (on the camera segment, its guided share is 1),
+        with the posterior probabilities ``sampling`` holds. ``sunlight``:
         the segment's scattered sunlight by ``"quadrature"`` or ``"sampled"`` at
         ``SAMPLED_SUNLIGHT_POINTS`` points (:meth:`LineIntegral.sampled_sunlight`), or None: not
         computed (the light is 0), only where the path goes on. ``goes_on`` False: the path
