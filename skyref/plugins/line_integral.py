@@ -28,7 +28,11 @@ On segments after the camera's, S is *sampled* instead (:meth:`LineIntegral.samp
 a few stratified points drawn like the forced collision, but by the lit panels' masses only, each
 weighted by sigma_s T / pdf, times the phase function and the sun's transmittance there. The
 quadrature's nodes each need a sun lookup; the points need one each, and since sigma_s T is what
-they are drawn by, the estimate varies only with the sun's transmittance along the segment.
+they are drawn by, the estimate varies only with the sun's transmittance along the segment. For
+a low sun that varies by orders of magnitude along a segment rising from low air, so there the
+points are drawn by sigma_s T T_sun, each panel's mass and in-panel density tilted by the sun's
+optical depth at its ends in the most transparent channel (:class:`SunTilt`, from a small table:
+:class:`~skyref.plugins.sun_optical_depth.GreySunDepth`).
 Such segments, whose light is not integrated by quadrature, get cheaper panels
 (:meth:`LineIntegral._sampling_panels`): fewer of them, their optical depths by the rule uniform
 in t, and proxy masses in closed form. That halved the cost of a path's later segments at the
@@ -78,6 +82,10 @@ SAMPLING_DEPTH_BREAKS = (2.0, 8.0)
 #: 0.7): the noisiest channel's variance was lowest at 0.3 on one, 0.7 on another, 0.5 between.
 OPAQUE_PROXY_PRIOR = 0.5
 
+#: Largest change of the sun's optical depth across a panel that tilts its sampled sunlight's
+#: points (:class:`SunTilt`; beyond it the points follow a tilt of this size: still unbiased).
+SUN_TILT_LIMIT = 60.0
+
 
 def grey_sum(grey, per_constituent):
     """sum_c grey_c x_c over the constituents whose grey coefficient is not None (a grey
@@ -85,13 +93,31 @@ def grey_sum(grey, per_constituent):
     return sum((g * x for g, x in zip(grey, per_constituent) if g is not None), mi.Float(0.0))
 
 
-def _mean_transmittance(coefficients, start, depth):
+def _mean_transmittance(coefficients, start, depth, sunlit=None):
     """T(a) (1 - e^-K) / K for a panel of optical thickness K = sum_c k_c depth_c beginning at
     optical depth sum_c k_c start_c (grey coefficients k_c per constituent): the panel's mean
-    transmittance, T(a) - T(b) over K, which tends to T(a) as K -> 0."""
+    transmittance, T(a) - T(b) over K, which tends to T(a) as K -> 0. With ``sunlit`` (a
+    :class:`SunTilt`), the mean of T times the sun's transmittance, taken as exponential across
+    the panel: T(a) T_sun(a) (1 - e^-(K + D)) / (K + D), D the change of the sun's optical depth."""
     thickness = grey_sum(coefficients, depth)
-    loss = dr.select(thickness > 1e-3, (1.0 - dr.exp(-thickness)) / thickness, 1.0 - 0.5 * thickness)
-    return dr.exp(-grey_sum(coefficients, start)) * loss
+    start_depth = grey_sum(coefficients, start)
+    if sunlit is not None:
+        thickness = thickness + sunlit.change
+        start_depth = start_depth + sunlit.start
+    small = dr.abs(thickness) <= 1e-3
+    loss = dr.select(small, 1.0 - 0.5 * thickness, (1.0 - dr.exp(-thickness)) / dr.select(small, 1.0, thickness))
+    return dr.exp(-start_depth) * loss
+
+
+class SunTilt:
+    """The sun's optical depth (most transparent channel) at a panel's start, and its change
+    across the panel, clamped to +-SUN_TILT_LIMIT: the sampled sunlight's points
+    (:meth:`LineIntegral.sampled_sunlight`) are drawn by sigma_s T times the sun's
+    transmittance, taken as exponential within each panel."""
+
+    def __init__(self, start, change):
+        self.start = start
+        self.change = dr.clip(change, -SUN_TILT_LIMIT, SUN_TILT_LIMIT)
 
 
 class GreyProxy:
@@ -111,13 +137,15 @@ class GreyProxy:
         """Proxy transmittance for the per-constituent optical depths at relative density 1."""
         return 0.5 * (dr.exp(-grey_sum(self.extinction, unit_depths)) + dr.exp(-grey_sum(self.least, unit_depths)))
 
-    def panel_mass(self, start, depth):
+    def panel_mass(self, start, depth, sunlit=None):
         """The proxy's scattering mass of a panel, integral of grey sigma_s(t) T(0, t) dt over it,
         from the per-constituent unit optical depths from the segment's start to the panel
         (``start``) and across it (``depth``), with the grey albedo taken as constant across
         the panel: for each of the proxy's two transmittances, (scattering depth / extinction
-        depth) x (T(a) - T(b)). Positive wherever the panel scatters."""
-        mean = _mean_transmittance(self.extinction, start, depth) + _mean_transmittance(self.least, start, depth)
+        depth) x (T(a) - T(b)). Positive wherever the panel scatters. With ``sunlit`` (a
+        :class:`SunTilt`), times the sun's transmittance."""
+        mean = (_mean_transmittance(self.extinction, start, depth, sunlit)
+                + _mean_transmittance(self.least, start, depth, sunlit))
         return dr.detach(0.5 * grey_sum(self.scattering, depth) * mean)
 
     def ground_mass(self, total):
@@ -125,10 +153,11 @@ class GreyProxy:
         depths ``total``: the proxy's transmittance times its albedo."""
         return self.transmittance(total) * self.albedo
 
-    def panel_map(self, depth):
+    def panel_map(self, depth, sunlit=None):
         """The :class:`PanelMap` that draws points in a panel of per-constituent unit optical
-        depths ``depth``: exponentially in the most transparent channel's optical depth."""
-        return PanelMap(grey_sum(self.least, depth))
+        depths ``depth``: exponentially in the most transparent channel's optical depth (plus,
+        with ``sunlit``, the change of the sun's)."""
+        return PanelMap(grey_sum(self.least, depth) + (0.0 if sunlit is None else sunlit.change))
 
     def mix(self, quadrature, on_ground):
         """The segment's sampling masses: (``quadrature`` as it is, the ground's mass, None),
@@ -149,12 +178,12 @@ class OpaqueProxy(GreyProxy):
     def transmittance(self, unit_depths):
         return dr.exp(-grey_sum(self.extinction, unit_depths))
 
-    def panel_mass(self, start, depth):
-        return dr.detach(grey_sum(self.scattering, depth) * _mean_transmittance(self.extinction, start, depth))
+    def panel_mass(self, start, depth, sunlit=None):
+        return dr.detach(grey_sum(self.scattering, depth) * _mean_transmittance(self.extinction, start, depth, sunlit))
 
-    def panel_map(self, depth):
+    def panel_map(self, depth, sunlit=None):
         """Exponentially in this proxy's own optical depth: within a panel, where its mass lies."""
-        return PanelMap(grey_sum(self.extinction, depth))
+        return PanelMap(grey_sum(self.extinction, depth) + (0.0 if sunlit is None else sunlit.change))
 
 
 class ProxyMixture:
@@ -192,13 +221,13 @@ class ProxyMixture:
         """The proxies' prior probabilities (grey, opaque)."""
         return mi.ArrayXf([mi.Float(1.0 - OPAQUE_PROXY_PRIOR), mi.Float(OPAQUE_PROXY_PRIOR)])
 
-    def panel_mass(self, start, depth):
+    def panel_mass(self, start, depth, sunlit=None):
         """Each proxy's mass of the panel (ArrayXf: grey, opaque)."""
-        return mi.ArrayXf([proxy.panel_mass(start, depth) for proxy in self.proxies])
+        return mi.ArrayXf([proxy.panel_mass(start, depth, sunlit) for proxy in self.proxies])
 
-    def panel_map(self, depth):
+    def panel_map(self, depth, sunlit=None):
         """Each proxy's :class:`PanelMap` of the panel (a tuple: grey, opaque)."""
-        return tuple(proxy.panel_map(depth) for proxy in self.proxies)
+        return tuple(proxy.panel_map(depth, sunlit) for proxy in self.proxies)
 
     def mix(self, quadrature, on_ground):
         """The segment's sampling masses, from its :class:`SegmentQuadrature` holding each
@@ -218,7 +247,7 @@ class ProxyMixture:
         proxy_masses, proxy_lit_masses = scaled(quadrature.masses), scaled(quadrature.lit_masses)
         mixed_quadrature = SegmentQuadrature(quadrature.panels, quadrature.maps, quadrature.prefix, quadrature.total,
                                              mixed(proxy_masses), mixed(proxy_lit_masses),
-                                             proxy_masses, proxy_lit_masses)
+                                             proxy_masses, proxy_lit_masses, quadrature.lit_maps)
         ground = ground * scale
         return mixed_quadrature, dr.sum(ground, axis=0), ground
 
@@ -241,9 +270,12 @@ class SegmentQuadrature:
     each proxy's share of them per panel (ArrayXf), and each panel's map a tuple (one per proxy);
     else those two are None."""
 
-    def __init__(self, panels, maps, prefix, total, masses, lit_masses, proxy_masses=None, proxy_lit_masses=None):
+    def __init__(self, panels, maps, prefix, total, masses, lit_masses, proxy_masses=None, proxy_lit_masses=None,
+                 lit_maps=None):
         self.panels = panels
         self.maps = maps
+        #: the maps that draw the sampled sunlight's points (given None: ``maps``)
+        self.lit_maps = maps if lit_maps is None else lit_maps
         self.prefix = prefix
         self.total = total
         self.masses = masses
@@ -259,10 +291,11 @@ class PanelMap:
     kappa, which spaces the nodes evenly in that channel's transmittance (a horizontal ray
     through hazy air loses e^-50 in its first panel); every other channel's transmittance is
     then (1 - u (1 - e^-kappa))^(k / k_min - 1), a low power of u that the rule integrates well.
-    Thinner panels are uniform, g(u) = u."""
+    Thinner panels are uniform, g(u) = u. A negative kappa draws points densest at the panel's
+    end (a sampled sunlight's panel whose sun transmittance grows along it, :class:`SunTilt`)."""
 
     def __init__(self, kappa):
-        self.thick = kappa > PANEL_THICKNESS
+        self.thick = dr.abs(kappa) > PANEL_THICKNESS
         self.loss = -dr.select(self.thick, dr.exp(-kappa) - 1.0, 0.0)
         self.inv_kappa = dr.rcp(dr.select(self.thick, kappa, 1.0))
 
@@ -292,13 +325,17 @@ class LineIntegral:
     sun from the segments integrated by quadrature can pass below their start (a sun near or
     below the horizon, :meth:`~skyref.plugins.geometry.SphericalShell.sun_can_graze`), the
     tangent altitudes at which those segments' panels split (the profiles' levels; none
-    otherwise: the splits double the kernel, compiled only where needed)."""
+    otherwise: the splits double the kernel, compiled only where needed). ``sunlit_sampling``: a
+    :class:`~skyref.plugins.sun_optical_depth.GreySunDepth` of the most transparent channel
+    where the sampled sunlight's points are drawn with the sun's transmittance (a low sun:
+    :meth:`sampled_sunlight`), else None."""
 
     def __init__(self, optics, geometry, sun_depth, levels, nodes_per_panel: int = NODES_PER_PANEL,
-                 polarized: bool = False, grazing_levels=()):
+                 polarized: bool = False, grazing_levels=(), sunlit_sampling=None):
         self.optics = optics
         self.geometry = geometry
         self.sun_depth = sun_depth
+        self.sunlit_sampling = sunlit_sampling
         self.levels = tuple(float(x) for x in levels)
         self.grazing_levels = tuple(float(x) for x in grazing_levels)
         self.rule = GaussLegendreRule(nodes_per_panel)
@@ -437,16 +474,40 @@ class LineIntegral:
         panels, lit = self._panels(channels, p, d, h, length, sun, rising_only, sunlight)
         prefix = [mi.Float(0.0) for _ in components]
         prefixes, masses, maps = [], [], []
-        for a, b in panels:
+        tilted = sunlight is not None and self.sunlit_sampling is not None
+        sun_depths = self._sun_depths(p, d, panels, sun) if tilted else None
+        lit_masses, lit_maps = [], []
+        for i, (a, b) in enumerate(panels):
             depth = self._unit_depth(p, d, a, b - a)
             prefixes.append(prefix)
             masses.append(grey.panel_mass(prefix, depth))
             maps.append(grey.panel_map(depth))
+            if tilted:
+                tilt = SunTilt(sun_depths[i], sun_depths[i + 1] - sun_depths[i])
+                lit_masses.append(grey.panel_mass(prefix, depth, tilt))
+                lit_maps.append(grey.panel_map(depth, tilt))
             prefix = [q + r for q, r in zip(prefix, depth)]
         transmittance = dr.exp(-channels.optical_depth(prefix))
-        lit_masses = None if sunlight is None else [dr.select(on, m, 0.0) for on, m in zip(lit, masses)]
+        if sunlight is None:
+            lit_masses = None
+        else:
+            lit_masses = [dr.select(on, m, 0.0) for on, m in zip(lit, lit_masses if tilted else masses)]
         light = mi.ArrayXf([mi.Float(0.0) for _ in range((2 if self.polarized else 1) * channels.count)])
-        return light, transmittance, SegmentQuadrature(panels, maps, prefixes, prefix, masses, lit_masses)
+        return light, transmittance, SegmentQuadrature(panels, maps, prefixes, prefix, masses, lit_masses,
+                                                       lit_maps=lit_maps if tilted else None)
+
+    def _sun_depths(self, p, d, panels, sun):
+        """The sun's optical depth in the most transparent channel (``sunlit_sampling``) at each
+        panel boundary (the panels' starts and the last one's end), less the least of them (a
+        common factor of the tilted masses, which could otherwise underflow), at most 80."""
+        depths = []
+        for t in [a for a, _ in panels] + [panels[-1][1]]:
+            x = p + t * d
+            depths.append(dr.detach(self.sunlit_sampling(self.geometry.altitude(x), dr.dot(self.geometry.up(x), sun))))
+        least = depths[0]
+        for depth in depths[1:]:
+            least = dr.minimum(least, depth)
+        return [dr.minimum(depth - least, 80.0) for depth in depths]
 
     def _panel_map(self, channels, p, d, a, width):
         """The :class:`PanelMap` of the panel [a, a + width]: uniform for an optically thin
@@ -465,7 +526,7 @@ class LineIntegral:
         :class:`ProxyMixture`'s quadrature splits v once more, between its proxies by their
         shares of the panel's mass, and the chosen proxy's map places the point (pdf(t) =
         (mass_i / total) sum_k share_k,i density_k(t) / (b_i - a_i)). ``lit``: draw by the panels'
-        lit masses instead (:meth:`sampled_sunlight`). Returns (point, altitude, sigma_s(t)
+        lit masses and maps instead (:meth:`sampled_sunlight`). Returns (point, altitude, sigma_s(t)
         T(0, t) / pdf(t) per channel, 0 where the masses are all 0; the local coefficients (parts,
         sigma_s, sigma_t) at the point; for a mixture each proxy's share_k,i density_k(t), which
         :meth:`ProxyMixture.posterior` needs, else None)."""
@@ -477,10 +538,10 @@ class LineIntegral:
         a, width, mass, start = mi.Float(0.0), mi.Float(0.0), mi.Float(1.0), mi.Float(0.0)
         panel = mi.UInt32(0)
         prefix = [mi.Float(0.0) for _ in quadrature.total]
-        panel_map = quadrature.maps[0]
+        panel_map = (quadrature.lit_maps if lit else quadrature.maps)[0]
         own = None if by_proxy is None else by_proxy[0]
         for i, ((lo, hi), panel_prefix, panel_mass, panel_map_i) in enumerate(zip(
-                quadrature.panels, quadrature.prefix, masses, quadrature.maps)):
+                quadrature.panels, quadrature.prefix, masses, quadrature.lit_maps if lit else quadrature.maps)):
             chosen = (target >= cumulative) & (panel_mass > 0.0)
             panel = dr.select(chosen, i, panel)
             a, width, mass = dr.select(chosen, lo, a), dr.select(chosen, hi - lo, width), dr.select(chosen, panel_mass, mass)
@@ -532,8 +593,10 @@ class LineIntegral:
         The phase function is constant along the segment and sigma_s T is what the points are
         drawn by, so the estimate varies only with the sun's transmittance (and the channels'
         departure from the grey proxy): a few points carry a segment, at one sun lookup each,
-        where the quadrature pays one per node. Segments with no lit mass give 0. Polarized: 2 K
-        values, as :meth:`integrate`'s."""
+        where the quadrature pays one per node. With ``sunlit_sampling`` (a low sun) the lit
+        masses and maps are tilted by T_sun as well, which the estimate then varies with only
+        where it departs from exponential within a panel. Segments with no lit mass give 0.
+        Polarized: 2 K values, as :meth:`integrate`'s."""
         lit_total = sum(quadrature.lit_masses, mi.Float(0.0))
         cos_scatter = dr.dot(d, sun)
         light = mi.ArrayXf([mi.Float(0.0) for _ in range((2 if self.polarized else 1) * channels.count)])

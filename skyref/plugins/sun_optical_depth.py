@@ -13,6 +13,9 @@ their optical depth is not tabulated (the line integral decides shadow geometric
 
 Plane-parallel slab: the vertical column above the point (closed form per profile) / mu_s.
 
+:class:`GreySunDepth`: sum_c k_c tau_c for fixed grey coefficients k_c, from a coarse copy of the
+table that stays in cache, for sampling decisions that look the sun up at many points.
+
 References
 ----------
 E. Bruneton, "A Qualitative and Quantitative Evaluation of 8 Clear Sky Models", IEEE TVCG 23
@@ -31,7 +34,8 @@ import numpy as np
 from skyref.plugins.drjit_namespace import xp
 from skyref.plugins.quadrature import GaussLegendreRule, level_crossings, ordered_breakpoints, panel_levels
 
-__all__ = ["TABLE_SIZE", "TABLE_NODES", "unit_optical_depth", "table_coordinates", "SunOpticalDepth"]
+__all__ = ["TABLE_SIZE", "TABLE_NODES", "GREY_TABLE_SIZE", "unit_optical_depth", "table_coordinates",
+           "SunOpticalDepth", "GreySunDepth"]
 
 #: Table size (x_r, x_mu). Against the direct quadrature at random points and sun directions
 #: (``tests/test_line_integral.py``), the transmittance at 440 nm differs by at most 3e-5
@@ -40,6 +44,11 @@ TABLE_SIZE = (256, 1024)
 
 #: Gauss–Legendre nodes per half panel when the table is filled.
 TABLE_NODES = 6
+
+#: Size (x_r, x_mu) of :class:`GreySunDepth`'s table: 32 KB, read from cache. Looking the full
+#: table up (3 MB, 4 cache lines per lookup) at the ~15 panel boundaries of every path segment
+#: cost 18-45% more CPU per path; this one 8-16%.
+GREY_TABLE_SIZE = (64, 128)
 
 
 def unit_optical_depth(profiles, bottom_radius: float, top_radius: float, levels, h, mu):
@@ -99,7 +108,9 @@ class SunOpticalDepth:
         self.geometry = geometry
         if self.spherical:
             R, top = atmosphere.bottom_radius_m, atmosphere.top_radius_m
-            self.table = mi.Float(_table(self.profiles, R, top, panel_levels(atmosphere)))
+            #: the table as filled (float32, (x_r, x_mu, constituent) flattened)
+            self.values = _table(self.profiles, R, top, panel_levels(atmosphere))
+            self.table = mi.Float(self.values)
             self.R = R
             self.H = top - R
             self.rho_top = math.sqrt(top * top - R * R)
@@ -111,6 +122,12 @@ class SunOpticalDepth:
         if not self.spherical:
             inv_mu = dr.rcp(dr.maximum(mu_s, 1e-6))
             return [p.column_above(h, self.geometry.H, xp) * inv_mu for p in self.profiles]
+        x_r, x_mu = self.coordinates(h, mu_s)
+        return _bilinear(self.table, TABLE_SIZE, len(self.profiles), x_r, x_mu)
+
+    def coordinates(self, h, mu_s):
+        """The table coordinates (x_r, x_mu) in [0, 1] of altitude ``h`` and sun zenith cosine
+        ``mu_s`` (spherical shell)."""
         R, H = self.R, self.H
         h = dr.clip(h, 0.0, H)
         r = R + h
@@ -124,13 +141,46 @@ class SunOpticalDepth:
         d_min, d_max = H - h, rho + self.rho_top
         x_mu = dr.clip((d - d_min) / dr.maximum(d_max - d_min, 1e-6), 0.0, 1.0)
         x_r = dr.clip(rho / self.rho_top, 0.0, 1.0)
-        nr, nm = TABLE_SIZE
-        count = len(self.profiles)
-        fr, fm = x_r * (nr - 1), x_mu * (nm - 1)
-        i = dr.minimum(mi.UInt32(fr), nr - 2)
-        j = dr.minimum(mi.UInt32(fm), nm - 2)
-        a, b = fr - mi.Float(i), fm - mi.Float(j)
-        corners = [((i * nm + j) * count, (1.0 - a) * (1.0 - b)), ((i * nm + j + 1) * count, (1.0 - a) * b),
-                   (((i + 1) * nm + j) * count, a * (1.0 - b)), (((i + 1) * nm + j + 1) * count, a * b)]
-        return [sum(weight * dr.gather(mi.Float, self.table, index + c) for index, weight in corners)
-                for c in range(count)]
+        return x_r, x_mu
+
+
+def _bilinear(table, size, count, x_r, x_mu):
+    """Bilinear interpolation at (x_r, x_mu) in [0, 1]^2 of a table of ``size`` (x_r, x_mu)
+    points holding ``count`` interleaved values each: a list of ``count`` Floats."""
+    nr, nm = size
+    fr, fm = x_r * (nr - 1), x_mu * (nm - 1)
+    i = dr.minimum(mi.UInt32(fr), nr - 2)
+    j = dr.minimum(mi.UInt32(fm), nm - 2)
+    a, b = fr - mi.Float(i), fm - mi.Float(j)
+    corners = [((i * nm + j) * count, (1.0 - a) * (1.0 - b)), ((i * nm + j + 1) * count, (1.0 - a) * b),
+               (((i + 1) * nm + j) * count, a * (1.0 - b)), (((i + 1) * nm + j + 1) * count, a * b)]
+    return [sum(weight * dr.gather(mi.Float, table, index + c) for index, weight in corners) for c in range(count)]
+
+
+class GreySunDepth:
+    """The sun's optical depth sum_c k_c tau_c(h, mu_s) for fixed grey coefficients k_c (m^-1 at
+    relative density 1, one per constituent of ``sun_depth``'s atmosphere; None for none): on a
+    spherical shell from the full table resampled (bilinearly, in float64) on a
+    ``GREY_TABLE_SIZE`` grid of the same coordinates, on a plane-parallel slab in closed form.
+    It is coarse (turbidity 6, the most transparent of 360-760 nm, 200,000 random points: 99% within
+    0.42 of the full table's optical depth, all within 8% of it, up to 3.5 where rays to the sun
+    graze the ground at depths near 67), which only shapes sampling densities."""
+
+    def __init__(self, sun_depth: SunOpticalDepth, coefficients):
+        self.sun_depth = sun_depth
+        self.coefficients = [0.0 if k is None else float(k) for k in coefficients]
+        if sun_depth.spherical:
+            nr, nm = TABLE_SIZE
+            full = sun_depth.values.reshape(nr, nm, len(self.coefficients)).astype(np.float64) @ self.coefficients
+            gr, gm = GREY_TABLE_SIZE
+            at_r, at_mu = np.linspace(0.0, nr - 1.0, gr), np.linspace(0.0, nm - 1.0, gm)
+            rows = np.stack([np.interp(at_mu, np.arange(nm), full[i]) for i in range(nr)])
+            grey = np.stack([np.interp(at_r, np.arange(nr), rows[:, j]) for j in range(gm)], axis=1)
+            self.table = mi.Float(grey.astype(np.float32).ravel())
+
+    def __call__(self, h, mu_s):
+        """The grey optical depth (Float) from altitude ``h`` towards a sun of zenith cosine ``mu_s``."""
+        if not self.sun_depth.spherical:
+            return sum(k * tau for k, tau in zip(self.coefficients, self.sun_depth(h, mu_s)) if k != 0.0)
+        x_r, x_mu = self.sun_depth.coordinates(h, mu_s)
+        return _bilinear(self.table, GREY_TABLE_SIZE, 1, x_r, x_mu)[0]
