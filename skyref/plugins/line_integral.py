@@ -532,16 +532,17 @@ class LineIntegral:
         :meth:`ProxyMixture.posterior` needs, else None)."""
         masses = quadrature.lit_masses if lit else quadrature.masses
         by_proxy = quadrature.proxy_lit_masses if lit else quadrature.proxy_masses
+        maps = quadrature.lit_maps if lit else quadrature.maps
         total = sum(masses, mi.Float(0.0))
         target = u * total
         cumulative = mi.Float(0.0)
         a, width, mass, start = mi.Float(0.0), mi.Float(0.0), mi.Float(1.0), mi.Float(0.0)
         panel = mi.UInt32(0)
         prefix = [mi.Float(0.0) for _ in quadrature.total]
-        panel_map = (quadrature.lit_maps if lit else quadrature.maps)[0]
+        panel_map = maps[0]
         own = None if by_proxy is None else by_proxy[0]
         for i, ((lo, hi), panel_prefix, panel_mass, panel_map_i) in enumerate(zip(
-                quadrature.panels, quadrature.prefix, masses, quadrature.lit_maps if lit else quadrature.maps)):
+                quadrature.panels, quadrature.prefix, masses, maps)):
             chosen = (target >= cumulative) & (panel_mass > 0.0)
             panel = dr.select(chosen, i, panel)
             a, width, mass = dr.select(chosen, lo, a), dr.select(chosen, hi - lo, width), dr.select(chosen, panel_mass, mass)
