@@ -20,7 +20,11 @@ understates its speed.
 This measures noise, not bias. The two estimators' agreement is reported beside it, per sky, along
 a few views at a precision where z-scores mean something (:func:`agreement`).
 
-Usage: ``python benchmarks/groundtruth_speed.py [--quick]``; writes
+On a GPU (``--variant cuda_ad_rgb``) the clock is wall time instead of CPU time (each render
+ends in a copy to the host, which waits for the GPU), and the files are named after the variant
+(``results/groundtruth_speed_cuda_ad_rgb.md``). ``--grids rgb`` restricts the wavelength grids.
+
+Usage: ``python benchmarks/groundtruth_speed.py [--quick] [--variant V] [--grids G ...]``; writes
 ``results/groundtruth_speed.md`` and ``results/groundtruth_speed.json``
 (``{"skies": {name: {"speedup_vs_baseline": x, ...}}}``, x for the RGB grid).
 """
@@ -40,13 +44,10 @@ import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
-from skyref.plugins import load_mitsuba  # noqa: E402
-
-mi = load_mitsuba("llvm_ad_rgb")
-
 import skyref.atmosphere as atm  # noqa: E402
 from skyref.io.atomic import atomic_write  # noqa: E402
 from skyref.io.json_numpy import numpy_default  # noqa: E402
+from skyref.plugins import load_mitsuba  # noqa: E402
 from skyref.plugins.volpath_scene import stock_volpath_scene  # noqa: E402
 from skyref.render import render_sky, sensor_dict  # noqa: E402
 from skyref.scene import Camera, Observer, RenderSettings, Scene, Sun  # noqa: E402
@@ -84,24 +85,29 @@ def relative_rms(standard_error, radiance, mask):
     return math.sqrt(float(np.mean((se[lit] / value[lit]) ** 2)))
 
 
+#: The clock of the timed renders: CPU time on the CPU (steadier than wall time on a shared
+#: machine), wall time on a GPU (set by main from the variant).
+clock = time.process_time
+
+
 def time_integrator(scene, spp, estimator, scale):
     # compile first: one sample per batch launches the timed render's kernels (they do not
     # depend on the launch size, tests/test_integrator_plugin.py)
     render_sky(scene, spp=BATCHES, passes=BATCHES, seed=2, estimator=estimator)
-    start = time.process_time()
+    start = clock()
     sky = render_sky(scene, spp=BATCHES * spp * scale, passes=BATCHES, seed=1, estimator=estimator)
-    return time.process_time() - start, sky
+    return clock() - start, sky
 
 
-def time_volpath(scene, spp, scale, mask):
+def time_volpath(mi, scene, spp, scale, mask):
     description = stock_volpath_scene(scene.atmosphere, scene.sun.zenith_deg, scene.sun.azimuth_deg,
                                       scene.observer.altitude_m, sensor_dict(scene.camera),
                                       max_depth=scene.render.max_depth)
     volpath = mi.load_dict(description)
     mi.render(volpath, spp=2, seed=99).numpy()                   # compile first
-    start = time.process_time()
+    start = clock()
     batches = np.stack([mi.render(volpath, spp=spp * scale, seed=1 + b).numpy()[..., :3] for b in range(BATCHES)])
-    seconds = time.process_time() - start
+    seconds = clock() - start
     radiance = batches.mean(axis=0)
     return seconds, relative_rms(batches.std(axis=0, ddof=1) / math.sqrt(BATCHES), radiance, mask)
 
@@ -130,6 +136,17 @@ def agreement(scene):
     return float(np.mean(z ** 2)), float(np.max(np.abs(z))), float(max(np.max(se_a / a), np.max(se_b / b)))
 
 
+def gpu_name() -> str:
+    """The CUDA device's name, from nvidia-smi ("a GPU" where it cannot say)."""
+    import subprocess
+
+    try:
+        return subprocess.run(["nvidia-smi", "--query-gpu=name", "--format=csv,noheader"], capture_output=True,
+                              text=True, timeout=30).stdout.strip().splitlines()[0]
+    except (OSError, subprocess.SubprocessError, IndexError):
+        return "a GPU"
+
+
 def to_target(seconds, error):
     return seconds * (error / TARGET) ** 2
 
@@ -137,13 +154,25 @@ def to_target(seconds, error):
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="fewer samples (a smoke run, noisy numbers)")
+    parser.add_argument("--variant", default="llvm_ad_rgb",
+                        help="Mitsuba RGB variant (default llvm_ad_rgb; cuda_ad_rgb times the GPU by wall clock)")
+    parser.add_argument("--grids", nargs="+", choices=list(GRIDS), default=list(GRIDS), metavar="GRID",
+                        help="wavelength grids to time: " + ", ".join(repr(g) for g in GRIDS) + " (default all)")
     args = parser.parse_args()
     scale = 1 if args.quick else 4
+    mi = load_mitsuba(args.variant)
+    on_gpu = args.variant.startswith("cuda")
+    global clock
+    clock, unit = (time.perf_counter, "GPU wall") if on_gpu else (time.process_time, "CPU")
+    key = "gpu_wall" if on_gpu else "cpu"     # the JSON's name of the clock
+    stem = f"groundtruth_speed_{args.variant}" if args.variant != "llvm_ad_rgb" else "groundtruth_speed"
+    if "rgb" not in args.grids:
+        parser.error("--grids: include 'rgb' (the summary and the agreement check are on it)")
 
     rows, summary = [], {}
     for sky in SKIES:
         summary[sky] = {}
-        for grid in GRIDS:
+        for grid in args.grids:
             scene = scene_for(sky, grid)
             spp_dt, spp_li, spp_vp = SPP[grid]
             print(f"{sky}, {grid} ...", flush=True)
@@ -153,19 +182,19 @@ def main():
             t_li, line = time_integrator(scene, spp_li, "line_integral", scale)
             e_li = relative_rms(line.standard_error, line.radiance, mask)
             pixels = mask.size
-            entry = {"baseline_cpu_s_to_1pct": to_target(t_dt, e_dt),
-                     "line_integral_cpu_s_to_1pct": to_target(t_li, e_li),
+            entry = {f"baseline_{key}_s_to_1pct": to_target(t_dt, e_dt),
+                     f"line_integral_{key}_s_to_1pct": to_target(t_li, e_li),
                      "speedup_vs_baseline": to_target(t_dt, e_dt) / to_target(t_li, e_li),
-                     "baseline_cpu_us_per_channel_sample": 1e6 * t_dt / (pixels * BATCHES * spp_dt * scale
+                     f"baseline_{key}_us_per_channel_sample": 1e6 * t_dt / (pixels * BATCHES * spp_dt * scale
                                                                          * len(scene.wavelengths_nm)),
-                     "line_integral_cpu_us_per_channel_sample": 1e6 * t_li / (pixels * BATCHES * spp_li * scale
+                     f"line_integral_{key}_us_per_channel_sample": 1e6 * t_li / (pixels * BATCHES * spp_li * scale
                                                                               * len(scene.wavelengths_nm))}
             rows.append((sky, grid, "atmosphere, delta_tracking (baseline)", pixels * BATCHES * spp_dt * scale,
                          t_dt, e_dt))
             rows.append((sky, grid, "atmosphere, line_integral", pixels * BATCHES * spp_li * scale, t_li, e_li))
             if spp_vp:
-                t_vp, e_vp = time_volpath(scene, spp_vp, scale, mask)
-                entry["volpath_cpu_s_to_1pct"] = to_target(t_vp, e_vp)
+                t_vp, e_vp = time_volpath(mi, scene, spp_vp, scale, mask)
+                entry[f"volpath_{key}_s_to_1pct"] = to_target(t_vp, e_vp)
                 entry["speedup_baseline_vs_volpath"] = to_target(t_vp, e_vp) / to_target(t_dt, e_dt)
                 rows.append((sky, grid, "stock volpath + atmosphere_medium", pixels * BATCHES * spp_vp * scale,
                              t_vp, e_vp))
@@ -175,32 +204,33 @@ def main():
             summary[sky][grid] = entry
 
     lines = [
-        "# Ground truth speed: CPU time to 1% relative RMS error",
+        f"# Ground truth speed: {unit} time to 1% relative RMS error",
         "",
-        f"Generated by `python benchmarks/groundtruth_speed.py{' --quick' if args.quick else ''}` on "
-        f"{datetime.date.today().isoformat()} ({platform.machine()}, {os.cpu_count()} cores, variant llvm_ad_rgb).",
+        f"Generated by `python benchmarks/groundtruth_speed.py {' '.join(sys.argv[1:])}` on "
+        f"{datetime.date.today().isoformat()} ({platform.machine()}, {os.cpu_count()} cores, variant {args.variant}"
+        + (f", {gpu_name()}" if on_gpu else "") + ").",
         "",
         "128x64 equirectangular, pixel centres (volpath: pixel areas), observer 1 m; 16 independent batches per",
         "render. Error: relative RMS of the per-pixel standard errors over sky pixels (view zenith < 88 deg,",
         "> 3 deg from the sun) and wavelengths;",
-        "time to 1% = CPU time x (error / 1%)^2. The line integral draws scrambled Sobol points, whose error falls",
+        f"time to 1% = {unit} time x (error / 1%)^2. The line integral draws scrambled Sobol points, whose error falls",
         "faster than 1/sqrt(N): where its error is above 1%, the extrapolated time to 1% overstates its cost.",
         "",
-        "| sky | wavelengths | estimator | samples | CPU (s) | rel. RMS error | CPU s to 1% |",
+        f"| sky | wavelengths | estimator | samples | {unit} (s) | rel. RMS error | {unit} s to 1% |",
         "|---|---|---|---:|---:|---:|---:|",
     ]
     for sky, grid, name, samples, seconds, error in rows:
         lines.append(f"| {sky} | {grid} | {name} | {samples:,} | {seconds:.2f} | {100 * error:.2f}% | "
                      f"{to_target(seconds, error):,.1f} |")
-    lines += ["", "Speed-up of the line-integral estimator over the baseline at equal error (CPU time to 1%), and",
-              "the per-channel cost of one sample (CPU µs):", "",
+    lines += ["", f"Speed-up of the line-integral estimator over the baseline at equal error ({unit} time to 1%),",
+              f"and the per-channel cost of one sample ({unit} µs):", "",
               "| sky | wavelengths | speed-up vs baseline | baseline µs/channel/sample | line integral µs/channel/sample |",
               "|---|---|---:|---:|---:|"]
     for sky, grids in summary.items():
         for grid, entry in grids.items():
             lines.append(f"| {sky} | {grid} | {entry['speedup_vs_baseline']:.2f}x | "
-                         f"{entry['baseline_cpu_us_per_channel_sample']:.3f} | "
-                         f"{entry['line_integral_cpu_us_per_channel_sample']:.3f} |")
+                         f"{entry[f'baseline_{key}_us_per_channel_sample']:.3f} | "
+                         f"{entry[f'line_integral_{key}_us_per_channel_sample']:.3f} |")
     lines += ["", "Agreement of the two estimators (RGB) along "
               f"{len(AGREEMENT_VIEWS)} views (zenith, azimuth from the sun's): "
               + ", ".join(f"({z:g}, {a:g})" for z, a in AGREEMENT_VIEWS) + ", at the precision given:", "",
@@ -212,12 +242,12 @@ def main():
                      f"{100 * entry['agreement_max_rel_se']:.2f}% |")
     lines.append("")
     os.makedirs(RESULTS, exist_ok=True)
-    with atomic_write(os.path.join(RESULTS, "groundtruth_speed.md")) as f:
+    with atomic_write(os.path.join(RESULTS, f"{stem}.md")) as f:
         f.write("\n".join(lines))
-    report = {"generated": datetime.date.today().isoformat(), "quick": args.quick,
+    report = {"generated": datetime.date.today().isoformat(), "quick": args.quick, "variant": args.variant,
               "skies": {sky: {"speedup_vs_baseline": grids["rgb"]["speedup_vs_baseline"], "grids": grids}
                         for sky, grids in summary.items()}}
-    with atomic_write(os.path.join(RESULTS, "groundtruth_speed.json")) as f:
+    with atomic_write(os.path.join(RESULTS, f"{stem}.json")) as f:
         json.dump(report, f, indent=2, default=numpy_default)
     print("\n".join(lines))
 

@@ -2,8 +2,11 @@
 
 Dr.Jit loads libLLVM at import time. Debian 12's default libLLVM 15 and 16 make it abort
 ("LLVM ERROR: Cannot select ... fminimum"); libLLVM 17 or newer works (19 is the one tested).
-:func:`configure_libllvm` sets ``DRJIT_LIBLLVM_PATH`` to the newest working library it finds,
-or raises :class:`~skyref.errors.SkyrefSetupError` saying what to install.
+:func:`configure_libllvm` sets ``DRJIT_LIBLLVM_PATH`` to the newest working library it finds.
+Where there is none it sets :data:`NO_LIBRARY` instead, so that Dr.Jit's LLVM backend stays off
+rather than loading a library that crashes it: the CUDA variants still work (a GPU machine needs
+no libLLVM), and :func:`skyref.plugins.load_mitsuba` says what to install when an LLVM variant
+is asked for.
 """
 
 from __future__ import annotations
@@ -14,7 +17,6 @@ import re
 import subprocess
 import sys
 
-from skyref.errors import SkyrefSetupError
 
 #: Major versions of libLLVM that crash Dr.Jit 1.5 on these machines (see docs/design.md).
 BROKEN_MAJOR_VERSIONS = frozenset({15, 16})
@@ -30,6 +32,10 @@ _SEARCH_GLOBS = (
     "/opt/homebrew/opt/llvm/lib/libLLVM*.dylib",
     "/usr/local/opt/llvm/lib/libLLVM*.dylib",
 )
+
+#: What ``DRJIT_LIBLLVM_PATH`` is set to when no working libLLVM is found: no file, so Dr.Jit's
+#: LLVM backend stays inactive.
+NO_LIBRARY = "none (skyref found no working libLLVM)"
 
 INSTALL_HINT = (
     "Dr.Jit needs libLLVM 17 or newer (Debian's libLLVM 15/16 crash it). "
@@ -75,7 +81,8 @@ def working_library() -> str | None:
 
 
 def configure_libllvm() -> str:
-    """Point Dr.Jit at a working libLLVM; return its path.
+    """Point Dr.Jit at a working libLLVM; return its path (:data:`NO_LIBRARY` when none was
+    found: Dr.Jit's LLVM backend is then left inactive).
 
     A ``DRJIT_LIBLLVM_PATH`` already set by the user is respected. Must run before ``drjit`` is
     imported; if drjit is already loaded the current setting is returned unchanged.
@@ -85,9 +92,7 @@ def configure_libllvm() -> str:
         return preset
     if "drjit" in sys.modules:
         return ""
-    path = working_library()
-    if path is None:
-        raise SkyrefSetupError(INSTALL_HINT)
+    path = working_library() or NO_LIBRARY
     os.environ["DRJIT_LIBLLVM_PATH"] = path
     return path
 

@@ -1,10 +1,12 @@
-"""Shared fixtures: Mitsuba loaded once, in the CPU RGB variant, with skyref's plugins; the default
-scene file rendered by the baseline estimator."""
+"""Shared fixtures: Mitsuba loaded once, in the RGB variant of :mod:`tests.variants` (the CPU's
+unless ``SKYREF_TEST_BACKEND=cuda``), with skyref's plugins; the default scene file rendered by
+the baseline estimator."""
 
 import dataclasses
 from pathlib import Path
 
 import pytest
+from tests.variants import RGB
 
 EARTH_CLEAR = Path(__file__).resolve().parent.parent / "scenes" / "earth-clear.toml"
 
@@ -13,7 +15,7 @@ EARTH_CLEAR = Path(__file__).resolve().parent.parent / "scenes" / "earth-clear.t
 def mi():
     from skyref.plugins import load_mitsuba
 
-    return load_mitsuba("llvm_ad_rgb")
+    return load_mitsuba(RGB)
 
 
 @pytest.fixture(scope="session")

@@ -76,6 +76,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # `tests.reference
 from skyref.atmosphere import (Aerosol, Atmosphere, CornetteShanks, Rayleigh,  # noqa: E402
                                from_turbidity, solar_irradiance)
 from tests.references.disort import disort_radiance  # noqa: E402
+from tests.variants import RGB  # noqa: E402
 
 WAVELENGTH_NM = 550.0
 
@@ -226,7 +227,7 @@ def path_traced(case: str, sza: float, observer: str, target: float, estimator: 
     make the pilot underestimate), with BATCHES more batches combined batch by batch."""
     from skyref.plugins import load_mitsuba
 
-    load_mitsuba("llvm_ad_rgb")
+    load_mitsuba(RGB)
     from skyref.render import build_integrator
     from skyref.scene import Observer, Scene, Sun, direction_from_angles
 

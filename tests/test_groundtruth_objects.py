@@ -6,8 +6,9 @@ import numpy as np
 import skyref.atmosphere as A
 from skyref.plugins import load_mitsuba
 from skyref.scene import Observer, Scene, SceneObject, Sun, direction_from_angles
+from tests.variants import RGB
 
-mi = load_mitsuba("llvm_ad_rgb")
+mi = load_mitsuba(RGB)
 from skyref.render import build_integrator  # noqa: E402  (needs Mitsuba loaded)
 
 SEEDS = 8

@@ -15,9 +15,10 @@ import numpy as np
 import pytest
 
 from skyref.errors import ParameterError
+from tests.variants import RGB
 
 WL = [440.0, 500.0, 550.0, 610.0, 680.0]
-VARIANT = "llvm_ad_rgb"
+VARIANT = RGB
 
 #: The atmosphere of the round trip (unknowns of skyref.invert.parameters).
 TRUTH = dict(aod_550=0.25, angstrom_alpha=1.2, aerosol_g=0.8, ozone_du=320.0, ground_albedo=0.3)

@@ -103,6 +103,30 @@ def test_broken_libllvm_is_refused():
     assert "apt-get install libllvm19" in result.stdout
 
 
+def test_no_libllvm_refuses_llvm_variants_only():
+    """No working libLLVM (what configure_libllvm leaves on a machine without one): asking for
+    an LLVM variant stops with a SkyrefSetupError that says what to install, before any work;
+    importing the package and checking the CUDA backend still work (a GPU machine needs no
+    libLLVM)."""
+    from skyref._llvm import NO_LIBRARY
+
+    result = run("""
+        import drjit as dr
+        from skyref.errors import SkyrefSetupError
+        from skyref.plugins import load_mitsuba, supported_variants
+        assert not dr.has_backend(dr.JitBackend.LLVM)
+        assert not any(v.startswith("llvm") for v in supported_variants())
+        try:
+            load_mitsuba("llvm_ad_rgb")
+        except SkyrefSetupError as error:
+            print(error)
+        else:
+            raise SystemExit("no error")
+    """, DRJIT_LIBLLVM_PATH=NO_LIBRARY)
+    assert result.returncode == 0, result.stderr
+    assert "'llvm_ad_rgb'" in result.stdout and "apt-get install libllvm19" in result.stdout
+
+
 # --- shapes in a scene rendered with mi.render ------------------------------------------------
 
 def _view_through(mi, shape=None):

@@ -17,8 +17,9 @@ from skyref.io.png import exposure_from_ev100, preview_image
 from skyref.scene import Camera, Sun, load_scene, save_scene
 from skyref.timelapse import sun_from_options
 from tests.references.preview import solar_position, srgb8
+from tests.variants import RGB
 
-VARIANT = "llvm_ad_rgb"
+VARIANT = RGB
 EARTH_CLEAR = Path(__file__).resolve().parent.parent / "scenes" / "earth-clear.toml"
 UP = Camera(type="fisheye", width=128, height=128, fov_deg=180.0)
 EQUIRECT = Camera(type="equirectangular", width=128, height=64)

@@ -6,11 +6,12 @@ import pytest
 
 from skyref import _llvm, projection
 from skyref.scene import Camera
+from tests.variants import RGB, SPECTRAL
 
 _llvm.configure_libllvm()
 mi = pytest.importorskip("mitsuba")
 
-VARIANTS = ["llvm_ad_rgb", "llvm_ad_spectral"]
+VARIANTS = [RGB, SPECTRAL]
 ORIGIN = [10.0, -20.0, 30.0]
 
 
@@ -22,7 +23,7 @@ def variant(request):
     register_sensors()
     register_sensors()  # idempotent
     yield request.param
-    mi.set_variant("llvm_ad_rgb")  # the variant every other test module expects
+    mi.set_variant(RGB)  # the variant every other test module expects
 
 
 def sensor_dict(camera, spp=4, **film):

@@ -14,8 +14,9 @@ from skyref.scene import load_scene, save_scene
 from skyref.timelapse import frame_times
 
 from tests.references.preview import solar_position, srgb8
+from tests.variants import RGB
 
-VARIANT = "llvm_ad_rgb"
+VARIANT = RGB
 EARTH_CLEAR = Path(__file__).resolve().parent.parent / "scenes" / "earth-clear.toml"
 PARIS = (48.85, 2.35)
 THREE = ["--place", "48.85,2.35", "--from", "2026-06-21T10:00+02:00", "--to", "2026-06-21T11:00+02:00",

@@ -47,6 +47,7 @@ import drjit as dr  # noqa: E402
 
 from skyref.atmosphere import preset  # noqa: E402
 from skyref.scene import ESTIMATORS, direction_from_angles  # noqa: E402
+from tests.variants import RGB, SPECTRAL  # noqa: E402
 
 SUN_AZIMUTH_DEG = 180.0
 #: View directions (zenith, azimuth) in degrees, all >= 20 degrees from the sun at zenith 30 or
@@ -64,7 +65,7 @@ CONFIGS = [(0.0, 30.0), (0.0, 80.0), (1000.0, 30.0), (1000.0, 80.0)]  # (observe
 
 @pytest.fixture(scope="module")
 def rgb():
-    mi.set_variant("llvm_ad_rgb")
+    mi.set_variant(RGB)
     from skyref.plugins import integrator, volpath_scene
 
     volpath_scene.register()
@@ -332,11 +333,11 @@ def test_phase_function_conventions(rgb):
 
 
 def test_spectral_variant_coefficients():
-    """llvm_ad_spectral: the medium's sigma_t at continuous wavelengths (1 nm grid, linear
+    """The spectral variant: the medium's sigma_t at continuous wavelengths (1 nm grid, linear
     interpolation) matches the Atmosphere to 1e-4, and volpath renders finite radiance."""
-    if "llvm_ad_spectral" not in mi.variants():
-        pytest.skip("no llvm_ad_spectral variant")
-    mi.set_variant("llvm_ad_spectral")
+    if SPECTRAL not in mi.variants():
+        pytest.skip(f"no {SPECTRAL} variant")
+    mi.set_variant(SPECTRAL)
     try:
         from skyref.plugins import volpath_scene
 
@@ -361,4 +362,4 @@ def test_spectral_variant_coefficients():
         image = np.asarray(mi.render(scene, spp=256, seed=0))
         assert np.all(np.isfinite(image)) and np.all(image[0, :6] > 0.0)
     finally:
-        mi.set_variant("llvm_ad_rgb")
+        mi.set_variant(RGB)

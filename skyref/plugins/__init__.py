@@ -104,9 +104,14 @@ def load_mitsuba(variant: str | None = None):
     """Import Mitsuba with ``variant`` (default: :func:`default_variant`), register skyref's
     plugins for it and return the ``mitsuba`` module."""
     configure_libllvm()
+    import drjit as dr
     import mitsuba as mi
 
-    variant = check_choice("variant", variant or default_variant(), supported_variants())
+    variant = variant or default_variant()
+    if variant.startswith("llvm") and not dr.has_backend(dr.JitBackend.LLVM):
+        raise SkyrefSetupError(f"variant {variant!r} runs on Dr.Jit's LLVM backend, which has no working "
+                               f"libLLVM here (a CUDA GPU would take the cuda_ad_* variants). {INSTALL_HINT}")
+    variant = check_choice("variant", variant, supported_variants())
     if mi.variant() != variant:
         mi.set_variant(variant)
     register()

@@ -43,6 +43,7 @@ from skyref.atmosphere import Absorber, Aerosol, Atmosphere, Rayleigh, solar_irr
 from skyref.atmosphere.phase import read_mie_table
 from skyref.atmosphere.profiles import ExponentialProfile, PiecewiseLinearProfile
 from skyref.atmosphere.spectra import ConstantSpectrum
+from tests.variants import RGB
 
 DATA = Path(__file__).with_name("iprt_phaseA")
 
@@ -177,7 +178,7 @@ def integrator(setting: Setting, estimator: str = "line_integral"):
     """skyref's polarized integrator for the setting (plane-parallel; Mitsuba loaded)."""
     from skyref.plugins import load_mitsuba
 
-    load_mitsuba("llvm_ad_rgb")
+    load_mitsuba(RGB)
     from skyref.render import build_integrator
     from skyref.scene import Observer, Scene, Sun
 
