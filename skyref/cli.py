@@ -27,6 +27,7 @@ from skyref.atmosphere import PRESETS
 from skyref.audit.advise import advice_lines, load_map, parse_tolerance
 from skyref.audit.speed_map import ENTRIES, TRUTH_GRID, entry_summary, evaluate_map, fitted_entries, truth_skies
 from skyref.batch import load_grid, run_batch
+from skyref.batch.merge import import_skies
 from skyref.envmap import (DEFAULT_WIDTH, ORIENTATIONS, SUN_MODES, check_width, render_environment_map, snippet_path,
                            write_environment_map)
 from skyref.errors import ParameterError, SkyrefSetupError
@@ -172,6 +173,11 @@ def cmd_batch(args) -> int:
         print(f"{args.grid}: {len(grid)} skies ({' x '.join(f'{k}[{len(v)}]' for k, v in grid.axes.items())}), "
               f"output {grid.output.directory}")
         return 0
+    if args.import_from:
+        corrupt = 0
+        for source in args.import_from:
+            corrupt += len(import_skies(grid, source, parameter="--import-from")["corrupt"])
+        return 1 if corrupt else 0
     manifest = run_batch(grid, scheduler=args.scheduler, workers=args.workers, variant=args.variant,
                          verify=args.verify, progress=not args.quiet, netcdf=args.netcdf)
     print(f"{grid.output.directory}: {manifest['skies_finished']}/{manifest['skies_total']} skies finished, "
@@ -381,6 +387,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--netcdf", action="store_true", help="also write dataset.nc (netCDF-3, CF) once every sky "
                    "is finished")
     p.add_argument("--dry-run", action="store_true", help="check the grid and print its size; render nothing")
+    p.add_argument("--import-from", action="append", metavar="DIR",
+                   help="bring in the skies finished in DIR, a copy of this grid's output directory rendered "
+                   "elsewhere (checked by SHA-256), then stop; repeatable")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.set_defaults(run=cmd_batch)
 

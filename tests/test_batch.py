@@ -275,3 +275,58 @@ def test_the_truth_says_what_it_is_and_what_it_cost(tmp_path):
     assert truth_provenance(skies)["cpu_s"] is None
     with pytest.raises(ParameterError, match="truth skies"):
         truth_provenance(batch_skies(tmp_path / "no-batch-here"))
+
+
+def test_pieces_rendered_apart_import_into_the_same_directory_a_whole_run_makes(write_grid, tmp_path):
+    """A grid rendered in two pieces in two directories (as on two machines), one imported into
+    the other: the same EXRs and the same dataset as one run of the whole grid; the imported
+    markers say where from; importing again changes nothing; an EXR that does not match its
+    marker is left out; another grid's directory is refused naming the option, nothing written."""
+    import xarray as xr
+
+    from skyref.batch import run_batch
+    from skyref.batch.merge import import_skies
+    from skyref.batch.store import sha256_of
+    from skyref.cli import main
+
+    axes = '"sun.zenith_deg" = [20.0, 50.0, 80.0]'
+    output = 'width = 8\nheight = 4\nspp = 8\npasses = 2'
+    quiet = dict(workers=1, progress=False, log=lambda *_: None)
+    here = load_grid(write_grid(tmp_path / "here.toml", axes, 'directory = "here"\n' + output))
+    there = load_grid(write_grid(tmp_path / "there.toml", axes, 'directory = "there"\n' + output))
+    whole = load_grid(write_grid(tmp_path / "whole.toml", axes, 'directory = "whole"\n' + output))
+    run_batch(here, indices=[0], **quiet)
+    run_batch(there, indices=[1, 2], **quiet)
+    run_batch(whole, **quiet)
+
+    other = write_grid(tmp_path / "other.toml", '"sun.zenith_deg" = [20.0, 50.0]', 'directory = "here"\n' + output)
+    before = sorted(os.listdir(tmp_path / "here" / "skies"))
+    assert main(["batch", other, "--import-from", str(tmp_path / "there")]) == 2
+    with pytest.raises(ParameterError, match="source"):
+        import_skies(here, str(tmp_path / "nowhere"))
+    assert sorted(os.listdir(tmp_path / "here" / "skies")) == before
+
+    report = import_skies(here, str(tmp_path / "there"), log=lambda *_: None)
+    assert report == {"imported": ["sky-1", "sky-2"], "kept": [], "corrupt": []}
+    for i in range(3):
+        assert sha256_of(tmp_path / "here" / "skies" / f"sky-{i}.exr") == \
+            sha256_of(tmp_path / "whole" / "skies" / f"sky-{i}.exr")
+    ours = xr.open_zarr(str(tmp_path / "here" / "dataset.zarr")).load()
+    reference = xr.open_zarr(str(tmp_path / "whole" / "dataset.zarr")).load()
+    for name in ("radiance", "standard_error", "spp", "relative_error_p95"):
+        np.testing.assert_array_equal(ours[name].values, reference[name].values)
+    with open(tmp_path / "here" / "markers" / "sky-2.json") as f:
+        assert json.load(f)["imported_from"] == str(tmp_path / "there")
+    with open(tmp_path / "here" / "manifest.json") as f:
+        assert json.load(f)["skies_finished"] == 3
+    assert import_skies(here, str(tmp_path / "there"), log=lambda *_: None)["imported"] == []
+
+    with open(tmp_path / "there" / "skies" / "sky-2.exr", "r+b") as f:   # same size, other bytes
+        f.seek(-1, os.SEEK_END)
+        last = f.read(1)
+        f.seek(-1, os.SEEK_END)
+        f.write(bytes([last[0] ^ 0xFF]))
+    fresh = load_grid(write_grid(tmp_path / "fresh.toml", axes, 'directory = "fresh"\n' + output))
+    assert import_skies(fresh, str(tmp_path / "there"), log=lambda *_: None) == \
+        {"imported": ["sky-1"], "kept": [], "corrupt": ["sky-2"]}
+    assert not (tmp_path / "fresh" / "skies" / "sky-2.exr").exists()

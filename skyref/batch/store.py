@@ -66,9 +66,11 @@ def marker_of_exr(exr_path) -> str:
 class BatchStore:
     """The output directory of one grid (see module docstring)."""
 
-    def __init__(self, grid):
+    def __init__(self, grid, directory=None):
+        """The store of ``grid`` in its output directory (or in ``directory``: the same grid's
+        output copied from elsewhere)."""
         self.grid = grid
-        self.directory = os.path.abspath(grid.output.directory)
+        self.directory = os.path.abspath(directory if directory is not None else grid.output.directory)
         self.dataset_path = os.path.join(self.directory, DATASET)
         self.netcdf_path = os.path.join(self.directory, NETCDF)
 
@@ -142,6 +144,19 @@ class BatchStore:
             return not verify or sha256_of(self.exr_path(sky_id)) == marker["exr_sha256"]
         except (OSError, ValueError, KeyError):
             return False
+
+    def write_sky(self, index: int, sky):
+        """Write ``sky`` (a :class:`~skyref.sky.Sky` whose metadata hold ``spp`` and
+        ``relative_error_p95``) into its chunk of the dataset, in the grid's output format."""
+        meta = sky.metadata
+        if self.grid.output.format == "spectral":
+            images = {"radiance": sky.radiance, "standard_error": sky.standard_error}
+            if sky.polarized:
+                images.update(stokes=sky.stokes, stokes_standard_error=sky.stokes_error)
+        else:
+            images = {"rgb": sky.rgb().astype(np.float32)}
+        self.write_region(index, dict(images, spp=np.float32(meta["spp"]),
+                                      relative_error_p95=np.float32(meta["relative_error_p95"])))
 
     def write_region(self, index: int, values: dict):
         """Write one sky's arrays (name -> array) into its chunk of the dataset."""

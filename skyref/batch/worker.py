@@ -9,7 +9,6 @@ import os
 import resource
 import time
 
-import numpy as np
 
 from skyref.batch.store import BatchStore, sha256_of
 from skyref.io.exr import write_sky_exr
@@ -43,15 +42,8 @@ def render_and_store(task: dict) -> dict:
     store = BatchStore(grid)
     exr_path = store.exr_path(spec.sky_id)
     write_sky_exr(sky, exr_path)
+    store.write_sky(spec.index, sky)
     meta = sky.metadata
-    if output.format == "spectral":
-        images = {"radiance": sky.radiance, "standard_error": sky.standard_error}
-        if sky.polarized:
-            images.update(stokes=sky.stokes, stokes_standard_error=sky.stokes_error)
-    else:
-        images = {"rgb": sky.rgb().astype(np.float32)}
-    store.write_region(spec.index, dict(images, spp=np.float32(meta["spp"]),
-                                        relative_error_p95=np.float32(meta["relative_error_p95"])))
     marker = {"sky_id": spec.sky_id, "index": spec.index, "coordinates": spec.coordinates,
               "exr": os.path.relpath(exr_path, store.directory), "exr_sha256": sha256_of(exr_path),
               "exr_bytes": os.path.getsize(exr_path), "spp": meta["spp"], "seed": meta["seed"],

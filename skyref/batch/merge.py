@@ -1,0 +1,78 @@
+"""Skies of a grid rendered elsewhere, brought into this grid's output directory.
+
+A grid can be rendered in pieces on machines that share no file system (a GPU lent for an hour,
+a laptop, a cluster node): each piece is a copy of the same grid's output directory holding the
+skies that machine finished (``run_batch(..., indices=...)`` picks them). :func:`import_skies`
+takes every sky finished there and not here: it checks the piece's grid is this grid (the
+``grid.json`` fingerprints match), checks each EXR against its marker's SHA-256, copies the EXR,
+writes the sky into this directory's dataset from the EXR (the dataset's values of a sky are a
+function of its EXR: :meth:`~skyref.batch.store.BatchStore.write_sky`), and writes its marker
+last, with ``imported_from`` added, so that an import killed at any moment resumes like a run.
+Skies already finished here are kept as they are.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+
+from skyref.batch.store import BatchStore
+from skyref.errors import ParameterError
+from skyref.io.atomic import atomic_path
+from skyref.io.exr import read_sky_exr
+
+__all__ = ["import_skies"]
+
+
+def import_skies(grid, source, log=print, parameter: str = "source") -> dict:
+    """Import into ``grid``'s output directory the skies finished in ``source`` (another copy of
+    the same grid's output directory); returns ``{"imported": [sky ids], "kept": [ids already
+    finished here], "corrupt": [ids whose EXR does not match its marker, left out]}``.
+
+    Raises a ParameterError naming ``parameter`` before anything is written if ``source`` is not
+    an output directory of this grid (missing, no ``grid.json``, or another grid's)."""
+    theirs = BatchStore(grid, directory=source)
+    ours = BatchStore(grid)
+    fingerprint_path = os.path.join(theirs.directory, "grid.json")
+    expected = "the output directory of a run of this grid"
+    if not os.path.isdir(theirs.directory):
+        raise ParameterError(parameter, source, expected, "no such directory")
+    if not os.path.isfile(fingerprint_path):
+        raise ParameterError(parameter, source, expected, "it has no grid.json")
+    with open(fingerprint_path) as f:
+        if f.read() != grid.fingerprint():
+            raise ParameterError(parameter, source, expected, "its grid.json is another grid's")
+    if theirs.directory == ours.directory:
+        raise ParameterError(parameter, source, "another directory than the grid's own output", "it is the same")
+    first_scene = grid.validate()
+    ours.check_writable()
+    report = {"imported": [], "kept": [], "corrupt": []}
+    with ours.lock():
+        ours.prepare(first_scene)
+        for index in range(len(grid)):
+            sky_id = grid.sky_id(index)
+            if not os.path.exists(theirs.marker_path(sky_id)):
+                continue
+            if ours.is_finished(sky_id):
+                report["kept"].append(sky_id)
+            elif not theirs.is_finished(sky_id, verify=True):
+                report["corrupt"].append(sky_id)
+                log(f"skyref batch: {sky_id} in {theirs.directory} does not match its marker: not imported")
+            else:
+                _import(theirs, ours, index, sky_id)
+                report["imported"].append(sky_id)
+        ours.write_manifest()
+    log(f"skyref batch: imported {len(report['imported'])} skies from {theirs.directory} "
+        f"({len(report['kept'])} already finished here, kept; {len(report['corrupt'])} corrupt, left out)")
+    return report
+
+
+def _import(theirs: BatchStore, ours: BatchStore, index: int, sky_id: str) -> None:
+    """One sky: its EXR, then its dataset chunk, then its marker (the order of a render)."""
+    with atomic_path(ours.exr_path(sky_id)) as tmp:
+        shutil.copyfile(theirs.exr_path(sky_id), tmp)
+    ours.write_sky(index, read_sky_exr(ours.exr_path(sky_id)))
+    with open(theirs.marker_path(sky_id)) as f:
+        marker = json.load(f)
+    ours.write_marker(sky_id, dict(marker, imported_from=theirs.directory))
