@@ -648,6 +648,11 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
                 for k, value in enumerate(per_channel):
                     dr.scatter(image, dr.block_sum(value, spp, mode="evaluated"),
                                (group * len(ORDER_NAMES) + order) * values_per_order + k)
+            # Run the scatters now: left pending, one would fuse into the next launch's path
+            # tracer (with one sample per block, block_sum returns its input unevaluated), making
+            # a second variant of that kernel to compile (14 s on 2 cores, RGB): renders whose
+            # single-scattering launch had 1 sample per target compiled it twice.
+            dr.eval(image)
             return image
         for order, contribution in enumerate(contributions):
             for k, index in enumerate(indices * self.stokes):
