@@ -59,7 +59,8 @@ def test_new_sample_counts_reuse_the_compiled_path_kernels(mi, estimator):
     17 s compile in most new processes; the observer's altitude, a literal in the guide's kernel,
     compiled it again for each observer; with one sample per target in the line integral's
     single-scattering launch, a scatter left pending fused into it: 2 and 9 samples per
-    direction compiled it twice.)"""
+    direction compiled it twice; one direction alone, its one-entry table read as a scalar,
+    compiled both path kernels again.)"""
     import drjit as dr
 
     from skyref.plugins.integrator import AtmosphereIntegrator
@@ -69,7 +70,8 @@ def test_new_sample_counts_reuse_the_compiled_path_kernels(mi, estimator):
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     try:
         for turbidity, count, spp, seed, observer_m in [(2.0, 64, 2, 1, 1.0), (2.0, 96, 3, 2, 1.0),
-                                                        (4.0, 40, 5, 3, 500.0), (4.0, 40, 9, 4, 1.0)]:
+                                                        (4.0, 40, 5, 3, 500.0), (4.0, 40, 9, 4, 1.0),
+                                                        (4.0, 1, 9, 5, 1.0)]:
             directions = rng.normal(size=(count, 3))
             directions[:, 2] = np.abs(directions[:, 2])
             directions /= np.linalg.norm(directions, axis=1, keepdims=True)

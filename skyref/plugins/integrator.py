@@ -327,6 +327,13 @@ class SunLight:
         return self.frame.to_world(local), self.disk.limb_darkening_factor(local.z, xp)
 
 
+def _target_table(values: np.ndarray) -> np.ndarray:
+    """Per-target values (first axis: targets) for a kernel to gather by target, at least two
+    rows long: Dr.Jit reads a one-entry array as a scalar, which makes another variant of the
+    path tracer to compile (the last rounds of an adaptive render often have one pixel left)."""
+    return np.concatenate([values, values[:1]]) if len(values) == 1 else values
+
+
 class AtmosphereIntegrator(mi.SamplingIntegrator):
     """Mitsuba plugin ``atmosphere``. Properties (all optional):
 
@@ -499,7 +506,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             raise ParameterError("pixels", f"[{pixels.min()}, {pixels.max()}]", f"indices in [0, {width * height})",
                                  "outside the sensor's film")
         # Gathered by target even when every pixel is traced: one kernel for both cases.
-        table = mi.UInt32(pixels.astype(np.uint32))
+        table = mi.UInt32(_target_table(pixels.astype(np.uint32)))
 
         def camera_rays(sampler, target):
             pixel = dr.gather(mi.UInt32, table, target)
@@ -524,7 +531,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             raise ParameterError("orders", orders, "'all' with the delta_tracking estimator",
                                  "single scattering alone is traced apart by the line_integral estimator only")
         directions = np.asarray(directions, dtype=np.float32).reshape(-1, 3)
-        table = mi.Vector3f(*(mi.Float(directions[:, i]) for i in range(3)))
+        table = mi.Vector3f(*(mi.Float(column) for column in _target_table(directions).T))
 
         def camera_rays(sampler, target):
             return mi.Point3f(0.0), dr.gather(mi.Vector3f, table, target), mi.Bool(True)
