@@ -21,6 +21,22 @@ def run(code: str, **env) -> subprocess.CompletedProcess:
                           env=environment, timeout=600)
 
 
+def setup_error(setup: str, statement: str, **env) -> str:
+    """The message of the SkyrefSetupError that ``statement`` raises after ``setup`` in a fresh
+    interpreter (the test fails if it raises none, or anything else)."""
+    result = run(textwrap.dedent(setup) + textwrap.dedent(f"""
+        from skyref.errors import SkyrefSetupError
+        try:
+            {statement}
+        except SkyrefSetupError as error:
+            print(error)
+        else:
+            raise SystemExit("no error")
+    """), **env)
+    assert result.returncode == 0, result.stderr
+    return result.stdout
+
+
 #: Appended to the scripts below (same indentation): both kinds of plugin load.
 LOADS = """
         assert type(mi.load_dict({"type": "atmosphere"})).__name__ == "AtmosphereIntegrator"
@@ -87,20 +103,12 @@ def test_variant_set_after_import():
 def test_broken_libllvm_is_refused():
     """Dr.Jit made to load libLLVM 15 (which crashes its kernels): registering for an LLVM
     variant stops with a SkyrefSetupError that says what to do."""
-    result = run("""
+    message = setup_error("""
         import mitsuba as mi
         mi.set_variant("llvm_ad_rgb")
-        from skyref.errors import SkyrefSetupError
-        try:
-            import skyref.plugins
-        except SkyrefSetupError as error:
-            print(error)
-        else:
-            raise SystemExit("no error")
-    """, DRJIT_LIBLLVM_PATH=BROKEN_LIBLLVM)
-    assert result.returncode == 0, result.stderr
-    assert "libLLVM 15" in result.stdout and "DRJIT_LIBLLVM_PATH=" in result.stdout
-    assert "apt-get install libllvm19" in result.stdout
+    """, "import skyref.plugins", DRJIT_LIBLLVM_PATH=BROKEN_LIBLLVM)
+    assert "libLLVM 15" in message and "DRJIT_LIBLLVM_PATH=" in message
+    assert "apt-get install libllvm19" in message
 
 
 def test_no_libllvm_refuses_llvm_variants_only():
@@ -110,21 +118,13 @@ def test_no_libllvm_refuses_llvm_variants_only():
     libLLVM)."""
     from skyref._llvm import NO_LIBRARY
 
-    result = run("""
+    message = setup_error("""
         import drjit as dr
-        from skyref.errors import SkyrefSetupError
         from skyref.plugins import load_mitsuba, supported_variants
         assert not dr.has_backend(dr.JitBackend.LLVM)
         assert not any(v.startswith("llvm") for v in supported_variants())
-        try:
-            load_mitsuba("llvm_ad_rgb")
-        except SkyrefSetupError as error:
-            print(error)
-        else:
-            raise SystemExit("no error")
-    """, DRJIT_LIBLLVM_PATH=NO_LIBRARY)
-    assert result.returncode == 0, result.stderr
-    assert "'llvm_ad_rgb'" in result.stdout and "apt-get install libllvm19" in result.stdout
+    """, 'load_mitsuba("llvm_ad_rgb")', DRJIT_LIBLLVM_PATH=NO_LIBRARY)
+    assert "'llvm_ad_rgb'" in message and "apt-get install libllvm19" in message
 
 
 # --- shapes in a scene rendered with mi.render ------------------------------------------------
