@@ -178,8 +178,9 @@ def cmd_batch(args) -> int:
         for source in args.import_from:
             corrupt += len(import_skies(grid, source, parameter="--import-from")["corrupt"])
         return 1 if corrupt else 0
+    indices = grid.sky_numbers(args.skies) if args.skies is not None else None
     manifest = run_batch(grid, scheduler=args.scheduler, workers=args.workers, variant=args.variant,
-                         verify=args.verify, progress=not args.quiet, netcdf=args.netcdf)
+                         verify=args.verify, progress=not args.quiet, netcdf=args.netcdf, indices=indices)
     print(f"{grid.output.directory}: {manifest['skies_finished']}/{manifest['skies_total']} skies finished, "
           f"{len(manifest['failed'])} failed, this run {manifest['wall_time_s']:.1f} s"
           + (f"; netCDF copy {manifest['netcdf']}" if manifest["netcdf"] else ""))
@@ -387,6 +388,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--netcdf", action="store_true", help="also write dataset.nc (netCDF-3, CF) once every sky "
                    "is finished")
     p.add_argument("--dry-run", action="store_true", help="check the grid and print its size; render nothing")
+    p.add_argument("--skies", metavar="LIST", help="render only these sky numbers, e.g. 0-9,20 (a part of the "
+                   "grid for one machine: the same ids and seeds as the whole grid's run)")
     p.add_argument("--import-from", action="append", metavar="DIR",
                    help="bring in the skies finished in DIR, a copy of this grid's output directory rendered "
                    "elsewhere (checked by SHA-256), then stop; repeatable")

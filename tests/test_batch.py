@@ -278,8 +278,8 @@ def test_the_truth_says_what_it_is_and_what_it_cost(tmp_path):
 
 
 def test_pieces_rendered_apart_import_into_the_same_directory_a_whole_run_makes(write_grid, tmp_path):
-    """A grid rendered in two pieces in two directories (as on two machines), one imported into
-    the other: the same EXRs and the same dataset as one run of the whole grid; the imported
+    """A grid rendered in two pieces in two directories (as on two machines; one piece by
+    ``skyref batch --skies``), one imported into the other: the same EXRs and the same dataset as one run of the whole grid; the imported
     markers say where from; importing again changes nothing; an EXR that does not match its
     marker is left out; another grid's directory is refused naming the option, nothing written."""
     import xarray as xr
@@ -296,7 +296,9 @@ def test_pieces_rendered_apart_import_into_the_same_directory_a_whole_run_makes(
     there = load_grid(write_grid(tmp_path / "there.toml", axes, 'directory = "there"\n' + output))
     whole = load_grid(write_grid(tmp_path / "whole.toml", axes, 'directory = "whole"\n' + output))
     run_batch(here, indices=[0], **quiet)
-    run_batch(there, indices=[1, 2], **quiet)
+    assert main(["batch", str(tmp_path / "there.toml"), "--skies", "1-3", "-q"]) == 2    # no sky 3
+    assert not (tmp_path / "there").exists()
+    assert main(["batch", str(tmp_path / "there.toml"), "--skies", "1-2", "--workers", "1", "-q"]) == 0
     run_batch(whole, **quiet)
 
     other = write_grid(tmp_path / "other.toml", '"sun.zenith_deg" = [20.0, 50.0]', 'directory = "here"\n' + output)
