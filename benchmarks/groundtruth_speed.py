@@ -192,6 +192,9 @@ def main():
             rows.append((sky, grid, "atmosphere, delta_tracking (baseline)", pixels * BATCHES * spp_dt * scale,
                          t_dt, e_dt))
             rows.append((sky, grid, "atmosphere, line_integral", pixels * BATCHES * spp_li * scale, t_li, e_li))
+            # as measured, so that a run stopped at a time limit still tells what it measured
+            print(f"  {unit} s to 1%: baseline {entry[f'baseline_{key}_s_to_1pct']:,.1f}, line integral "
+                  f"{entry[f'line_integral_{key}_s_to_1pct']:,.1f} ({entry['speedup_vs_baseline']:.2f}x)", flush=True)
             if spp_vp:
                 t_vp, e_vp = time_volpath(mi, scene, spp_vp, scale, mask)
                 entry[f"volpath_{key}_s_to_1pct"] = to_target(t_vp, e_vp)
