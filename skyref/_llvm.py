@@ -17,7 +17,6 @@ import re
 import subprocess
 import sys
 
-
 #: Major versions of libLLVM that crash Dr.Jit 1.5 on these machines (see docs/design.md).
 BROKEN_MAJOR_VERSIONS = frozenset({15, 16})
 #: Oldest major version known to work.

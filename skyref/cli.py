@@ -168,6 +168,10 @@ def cmd_timelapse(args) -> int:
 
 def cmd_batch(args) -> int:
     grid = load_grid(args.grid)
+    indices = grid.sky_numbers(args.skies) if args.skies is not None else None
+    if indices is not None and args.import_from:
+        raise ParameterError("--skies", args.skies, "without --import-from (an import takes every sky finished there)",
+                             "both given")
     if args.dry_run:
         grid.validate()
         print(f"{args.grid}: {len(grid)} skies ({' x '.join(f'{k}[{len(v)}]' for k, v in grid.axes.items())}), "
@@ -178,7 +182,6 @@ def cmd_batch(args) -> int:
         for source in args.import_from:
             corrupt += len(import_skies(grid, source, parameter="--import-from")["corrupt"])
         return 1 if corrupt else 0
-    indices = grid.sky_numbers(args.skies) if args.skies is not None else None
     manifest = run_batch(grid, scheduler=args.scheduler, workers=args.workers, variant=args.variant,
                          verify=args.verify, progress=not args.quiet, netcdf=args.netcdf, indices=indices)
     print(f"{grid.output.directory}: {manifest['skies_finished']}/{manifest['skies_total']} skies finished, "

@@ -279,9 +279,10 @@ def test_the_truth_says_what_it_is_and_what_it_cost(tmp_path):
 
 def test_pieces_rendered_apart_import_into_the_same_directory_a_whole_run_makes(write_grid, tmp_path):
     """A grid rendered in two pieces in two directories (as on two machines; one piece by
-    ``skyref batch --skies``), one imported into the other: the same EXRs and the same dataset as one run of the whole grid; the imported
-    markers say where from; importing again changes nothing; an EXR that does not match its
-    marker is left out; another grid's directory is refused naming the option, nothing written."""
+    ``skyref batch --skies``), one imported into the other: the same EXRs and the same dataset as
+    one run of the whole grid; the imported markers say where from; importing again changes
+    nothing; an EXR that does not match its marker is left out; another grid's directory, and
+    --skies beside --import-from, are refused naming the option, nothing written."""
     import xarray as xr
 
     from skyref.batch import run_batch
@@ -304,6 +305,7 @@ def test_pieces_rendered_apart_import_into_the_same_directory_a_whole_run_makes(
     other = write_grid(tmp_path / "other.toml", '"sun.zenith_deg" = [20.0, 50.0]', 'directory = "here"\n' + output)
     before = sorted(os.listdir(tmp_path / "here" / "skies"))
     assert main(["batch", other, "--import-from", str(tmp_path / "there")]) == 2
+    assert main(["batch", str(tmp_path / "here.toml"), "--skies", "1", "--import-from", str(tmp_path / "there")]) == 2
     with pytest.raises(ParameterError, match="source"):
         import_skies(here, str(tmp_path / "nowhere"))
     assert sorted(os.listdir(tmp_path / "here" / "skies")) == before

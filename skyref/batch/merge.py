@@ -2,7 +2,7 @@
 
 A grid can be rendered in pieces on machines that share no file system (a GPU lent for an hour,
 a laptop, a cluster node): each piece is a copy of the same grid's output directory holding the
-skies that machine finished (``run_batch(..., indices=...)`` picks them). :func:`import_skies`
+skies that machine finished (``skyref batch GRID --skies 0-99`` renders a part). :func:`import_skies`
 takes every sky finished there and not here: it checks the piece's grid is this grid (the
 ``grid.json`` fingerprints match), checks each EXR against its marker's SHA-256, copies the EXR,
 writes the sky into this directory's dataset from the EXR (the dataset's values of a sky are a
@@ -34,15 +34,14 @@ def import_skies(grid, source, log=print, parameter: str = "source") -> dict:
     an output directory of this grid (missing, no ``grid.json``, or another grid's)."""
     theirs = BatchStore(grid, directory=source)
     ours = BatchStore(grid)
-    fingerprint_path = os.path.join(theirs.directory, "grid.json")
     expected = "the output directory of a run of this grid"
     if not os.path.isdir(theirs.directory):
         raise ParameterError(parameter, source, expected, "no such directory")
-    if not os.path.isfile(fingerprint_path):
+    stored = theirs.stored_fingerprint()
+    if stored is None:
         raise ParameterError(parameter, source, expected, "it has no grid.json")
-    with open(fingerprint_path) as f:
-        if f.read() != grid.fingerprint():
-            raise ParameterError(parameter, source, expected, "its grid.json is another grid's")
+    if stored != grid.fingerprint():
+        raise ParameterError(parameter, source, expected, "its grid.json is another grid's")
     if theirs.directory == ours.directory:
         raise ParameterError(parameter, source, "another directory than the grid's own output", "it is the same")
     first_scene = grid.validate()

@@ -74,6 +74,18 @@ class BatchStore:
         self.dataset_path = os.path.join(self.directory, DATASET)
         self.netcdf_path = os.path.join(self.directory, NETCDF)
 
+    @property
+    def fingerprint_path(self) -> str:
+        return os.path.join(self.directory, "grid.json")
+
+    def stored_fingerprint(self) -> str | None:
+        """The fingerprint of the grid whose output the directory holds (None: none yet)."""
+        try:
+            with open(self.fingerprint_path) as f:
+                return f.read()
+        except FileNotFoundError:
+            return None
+
     def exr_path(self, sky_id: str) -> str:
         return os.path.join(self.directory, "skies", f"{sky_id}.exr")
 
@@ -105,16 +117,13 @@ class BatchStore:
         by a killed run, and create the dataset on first use."""
         for sub in ("skies", "markers"):
             os.makedirs(os.path.join(self.directory, sub), exist_ok=True)
-        fingerprint_path = os.path.join(self.directory, "grid.json")
-        fingerprint = self.grid.fingerprint()
-        if os.path.exists(fingerprint_path):
-            with open(fingerprint_path) as f:
-                if f.read() != fingerprint:
-                    raise ParameterError("output.directory", self.directory, "an empty directory or one "
-                                         "holding this same grid", "it holds the output of a different grid")
-        else:
-            with atomic_write(fingerprint_path) as f:
-                f.write(fingerprint)
+        stored = self.stored_fingerprint()
+        if stored is None:
+            with atomic_write(self.fingerprint_path) as f:
+                f.write(self.grid.fingerprint())
+        elif stored != self.grid.fingerprint():
+            raise ParameterError("output.directory", self.directory, "an empty directory or one "
+                                 "holding this same grid", "it holds the output of a different grid")
         for leftover in glob.glob(os.path.join(self.directory, ".*.tmp*")) + glob.glob(
                 os.path.join(self.directory, "*", ".*.tmp*")):
             with contextlib.suppress(FileNotFoundError):

@@ -9,7 +9,6 @@ import os
 import resource
 import time
 
-
 from skyref.batch.store import BatchStore, sha256_of
 from skyref.io.exr import write_sky_exr
 from skyref.plugins import load_mitsuba
