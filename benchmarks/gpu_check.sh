@@ -7,7 +7,8 @@
 #      time to 1% against delta tracking in the same run (kernels compiled before each timing),
 #      written to results/groundtruth_speed_cuda_ad_rgb.{md,json}.
 # Usage: bash benchmarks/gpu_check.sh [TESTS_SECONDS [BENCHMARK_SECONDS]]  (defaults 420, 300)
-# Needs skyref importable (run.sh's .venv, or PYTHONPATH) and a CUDA driver.
+# Needs skyref importable (run.sh's .venv, or PYTHONPATH; on a machine without a package index,
+# the archive of benchmarks/gpu_bundle.sh) and a CUDA driver.
 set -uo pipefail
 cd "$(dirname "$0")/.."
 PYTHON=${PYTHON:-$( [ -x .venv/bin/python ] && echo .venv/bin/python || echo python3 )}
