@@ -254,9 +254,12 @@ class RadianceByOrder:
         return RadianceByOrder(channels.zeros(), channels.zeros(stokes), channels.zeros(stokes),
                                channels.zeros(stokes))
 
-    def file(self, order, light, active):
-        """Add ``light`` under scattering order ``order`` (1, 2, or 3 and more) where ``active``."""
-        self.single = dr.select(active & (order == 1), self.single + light, self.single)
+    def file(self, order, light, active, multiple_only=False):
+        """Add ``light`` under scattering order ``order`` (1, 2, or 3 and more) where ``active``;
+        ``multiple_only``: the caller knows the order is at least 2 (the single-scattering values
+        are then left out of the arithmetic, and of a loop's updated state)."""
+        if not multiple_only:
+            self.single = dr.select(active & (order == 1), self.single + light, self.single)
         self.double = dr.select(active & (order == 2), self.double + light, self.double)
         self.higher = dr.select(active & (order >= 3), self.higher + light, self.higher)
 
@@ -795,7 +798,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             light, _, path, stokes, sampling = self._line_segment(
                 sampler, channels, e_sun, path, stokes, camera=False, rising_only=False, sunlight="sampled",
                 sampling=sampling)
-            radiance.file(path.depth, light, True)      # scattered (or reflected) path.depth times
+            radiance.file(path.depth, light, True, multiple_only=True)  # scattered (or reflected) path.depth >= 2 times
             # Russian roulette once the largest channel throughput falls below LINE_ROULETTE_THROUGHPUT
             survival = dr.minimum(dr.max(dr.detach(path.throughput), axis=0) / LINE_ROULETTE_THROUGHPUT, 1.0)
             roulette = path.alive & (path.depth >= LINE_ROULETTE_DEPTH)
@@ -873,7 +876,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         u_air = dr.minimum(vertex_sample.x / dr.maximum(p_air, 1e-30), 1.0 - 2.0 ** -24)
         x, hx, weight, (parts, sigma_s, _), joint = self.line.sample_collision(channels, quadrature, p, d, u_air)
         u_direction = mi.Point2f(vertex_sample.y, vertex_sample.z)
-        d_air, phase_weight, guided = self._scatter_direction(parts, sigma_s, d, x, hx, sampler.next_1d(), u_direction,
+        d_air, scattering_weight, guided = self._scatter_direction(parts, sigma_s, d, x, hx, sampler.next_1d(), u_direction,
                                                               None if sampling is None else sampling.guided)
         if sampling is not None:
             sampling = PathSampling(ProxyMixture.posterior(mixture, ground_mass, joint, in_air),
@@ -882,8 +885,8 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             _, reduced = self.optics.phase_matrix(parts, sigma_s, dr.clip(dr.dot(d, d_air), -1.0, 1.0))
             stokes, factor = stokes.scatter(d_air, d, reduced, in_air)
             stokes = stokes.reflect(~in_air)
-            phase_weight = phase_weight * factor
-        air_throughput = throughput * weight * phase_weight / dr.maximum(p_air, 1e-30)
+            scattering_weight = scattering_weight * factor
+        air_throughput = throughput * weight * scattering_weight * dr.rcp(dr.maximum(p_air, 1e-30))
         d_ground = mi.Frame3f(up).to_world(mi.warp.square_to_cosine_hemisphere(u_direction))
         ground_throughput = throughput * transmittance * channels.albedo / dr.maximum(1.0 - p_air, 1e-30)
         next_vertex = PathVertex(dr.select(in_air, x, ground), dr.select(in_air, hx, 0.0),
@@ -893,7 +896,8 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
 
     def _scatter_direction(self, parts, sigma_s, d, point, altitude, u_choice, u_direction, guided_share=None):
         """The direction a line-integral path takes at a scattering event (incident direction d,
-        at ``point`` and ``altitude``), its weight p / pdf per channel, and the posterior
+        at ``point`` and ``altitude``), its weight sigma_s p / pdf per channel (the volume
+        scattering function over the direction's density, m^-1), and the posterior
         probability that the path's directions so far were drawn by the guided mixture.
         ``u_choice`` picks one of three ways to draw it:
 
@@ -942,7 +946,8 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         lobe_pdf = henyey_greenstein_phase(dr.dot(self.sun.direction, direction), g, xp) if lobe else 0.0
         guided_pdf = (1.0 - guided_alpha - guided_beta) * phase_pdf + guided_alpha * guide_pdf + guided_beta * lobe_pdf
         pdf = share * guided_pdf + (1.0 - share) * phase_pdf
-        return direction, optics.phase(parts, sigma_s, mu) / pdf, dr.detach(share * guided_pdf * dr.rcp(pdf))
+        scattered = optics.volume_scattering_function(parts, optics.component_phases(mu))
+        return direction, scattered * dr.rcp(pdf), dr.detach(share * guided_pdf * dr.rcp(pdf))
 
     @dr.syntax
     def _trace_delta_tracking(self, sampler, origin, direction, indices, active):

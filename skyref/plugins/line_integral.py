@@ -518,7 +518,19 @@ class LineIntegral:
 
     # --- the forced collision ------------------------------------------------------------------
 
-    def sample_collision(self, channels, quadrature, p, d, u, lit=False):
+    def sample_collision(self, channels, quadrature, p, d, u):
+        """The forced collision: a point of the segment drawn by :meth:`_draw_point`. Returns
+        (point, altitude, T(0, t) / pdf(t) per channel in m, 0 where the masses are all 0 (the
+        path's weight once multiplied by the volume scattering function there over the density
+        of its next direction); the local coefficients (parts, sigma_s, sigma_t) at the point;
+        for a mixture each proxy's share_k,i density_k(t), which :meth:`ProxyMixture.posterior`
+        needs, else None)."""
+        x, hx, tau, pdf, joint = self._draw_point(quadrature, p, d, u)
+        # 0 where nothing could be drawn (no mass on the segment: the caller discards the point)
+        weight = dr.exp(-channels.optical_depth(tau)) * dr.select(pdf > 0.0, dr.rcp(pdf), 0.0)
+        return x, hx, weight, self.optics.local(channels, hx), joint
+
+    def _draw_point(self, quadrature, p, d, u, lit=False):
         """A point of the segment from one uniform number ``u``: the panel i chosen by its grey
         mass (u falls in its share of the cumulative masses), then t = a_i + (b_i - a_i) g_i(v)
         with v the position of u within that share (uniform; pdf(t) = (mass_i / total) /
@@ -526,10 +538,10 @@ class LineIntegral:
         :class:`ProxyMixture`'s quadrature splits v once more, between its proxies by their
         shares of the panel's mass, and the chosen proxy's map places the point (pdf(t) =
         (mass_i / total) sum_k share_k,i density_k(t) / (b_i - a_i)). ``lit``: draw by the panels'
-        lit masses and maps instead (:meth:`sampled_sunlight`). Returns (point, altitude, sigma_s(t)
-        T(0, t) / pdf(t) per channel, 0 where the masses are all 0; the local coefficients (parts,
-        sigma_s, sigma_t) at the point; for a mixture each proxy's share_k,i density_k(t), which
-        :meth:`ProxyMixture.posterior` needs, else None)."""
+        lit masses and maps instead (:meth:`sampled_sunlight`). Returns (point, altitude, the
+        per-constituent optical depths at relative density 1 from p to it, pdf(t) in m^-1 (0
+        where the masses are all 0), for a mixture each proxy's share_k,i density_k(t), else
+        None). Nothing here is per channel."""
         masses = quadrature.lit_masses if lit else quadrature.masses
         by_proxy = quadrature.proxy_lit_masses if lit else quadrature.proxy_masses
         maps = quadrature.lit_maps if lit else quadrature.maps
@@ -575,11 +587,8 @@ class LineIntegral:
         tau = [q + r for q, r in zip(prefix, self._unit_depth(p, d, a, step))]
         x = p + t * d
         hx = self.geometry.altitude(x)
-        parts, sigma_s, sigma_t = self.optics.local(channels, hx)
         pdf = mass * in_panel / (total * dr.maximum(width, 1e-30))
-        # 0 where nothing could be drawn (no mass on the segment: the caller discards the point)
-        weight = dr.select(pdf > 0.0, sigma_s * dr.exp(-channels.optical_depth(tau)) / pdf, 0.0)
-        return x, hx, weight, (parts, sigma_s, sigma_t), joint
+        return x, hx, tau, pdf, joint
 
     # --- single scattering along the segment, sampled ----------------------------------------------
 
@@ -600,19 +609,25 @@ class LineIntegral:
         Polarized: 2 K values, as :meth:`integrate`'s."""
         lit_total = sum(quadrature.lit_masses, mi.Float(0.0))
         cos_scatter = dr.dot(d, sun)
+        # each constituent's phase function at the segment's one scattering angle
+        phases = None if self.polarized else self.optics.component_phases(cos_scatter)
         light = mi.ArrayXf([mi.Float(0.0) for _ in range((2 if self.polarized else 1) * channels.count)])
         for k in range(points):
             u_k = u + k / points
             u_k = dr.minimum(dr.select(u_k >= 1.0, u_k - 1.0, u_k), 1.0 - 2.0 ** -24)
-            x, hx, weight, (parts, sigma_s, _), _ = self.sample_collision(channels, quadrature, p, d, u_k, lit=True)
+            x, hx, tau, pdf, _ = self._draw_point(quadrature, p, d, u_k, lit=True)
             # a point of a lit panel can still fall a rounding error into the shadow
             lit = self.geometry.distance_to_ground(x, sun, hx) == dr.inf
             tau_sun = self.sun_depth(hx, dr.dot(self.geometry.up(x), sun))
-            arriving = weight * dr.exp(-channels.optical_depth(tau_sun))
+            # T(0, t) T_sun(t) / pdf(t): one exponential per channel for both transmittances
+            depth = channels.optical_depth([a + b for a, b in zip(tau, tau_sun)])
+            arriving = dr.exp(-depth) * dr.select(pdf > 0.0, dr.rcp(pdf), 0.0)
+            parts, sigma_s, _ = self.optics.local(channels, hx)
             if self.polarized:
                 phase, reduced = self.optics.phase_matrix(parts, sigma_s, cos_scatter)
+                arriving = arriving * sigma_s
                 arriving = mi.ArrayXf([*(arriving * phase), *(arriving * phase * reduced[0])])
             else:
-                arriving = arriving * self.optics.phase(parts, sigma_s, cos_scatter)
+                arriving = arriving * self.optics.volume_scattering_function(parts, phases)
             light += dr.select(lit, arriving, 0.0)
         return dr.select(lit_total > 0.0, light * (1.0 / points), 0.0)

@@ -225,13 +225,25 @@ class AtmosphereOptics:
                 sigma_t = sigma_t + a * rho
         return sigma_s_parts, sigma_s, sigma_t
 
+    def component_phases(self, mu):
+        """Each constituent's phase function p_i(mu), sr^-1 (None for an absorber)."""
+        return [None if c.model.phase is None else c.phase(mu) for c in self.components]
+
+    def volume_scattering_function(self, sigma_s_parts, phases):
+        """beta = sum_i sigma_s,i p_i per channel, m^-1 sr^-1: the light scattered per unit
+        length and solid angle, from the local scattering coefficients (:meth:`local`) and the
+        constituents' ``phases`` (:meth:`component_phases`). A path's weight multiplies it by
+        the transmittance over the sampling densities of the point and direction; no division by
+        sigma_s, which :meth:`phase` needs."""
+        total = 0.0
+        for part, p in zip(sigma_s_parts, phases):
+            if part is not None:
+                total = part * p if isinstance(total, float) else total + part * p
+        return total
+
     def phase(self, sigma_s_parts, sigma_s, mu):
         """The local mixture phase function per channel: sum_i sigma_s,i p_i(mu) / sigma_s."""
-        total = 0.0 * sigma_s
-        for c, part in zip(self.components, sigma_s_parts):
-            if part is not None:
-                total = total + part * c.phase(mu)
-        return total / dr.maximum(sigma_s, 1e-30)
+        return self.volume_scattering_function(sigma_s_parts, self.component_phases(mu)) / dr.maximum(sigma_s, 1e-30)
 
     def phase_matrix(self, sigma_s_parts, sigma_s, mu):
         """The local mixture's phase matrix per channel: (p, reduced), p as :meth:`phase` and
