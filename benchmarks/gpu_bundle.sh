@@ -6,7 +6,8 @@
 # x86-64, unpacked and slimmed (only the Mitsuba variants skyref renders in, no C headers, no
 # coverage reports, of pvlib's data only the ASTM G173 solar spectrum) into one archive of about
 # 41 MB to carry there. Checked on 2026-12-04 in a Python 3.12 environment holding only those:
-# 122 tests (EXR, batch on dask, plugins, sensors, objects) passed in llvm_ad_rgb.
+# 205 tests (EXR, batch on dask, plugins, sensors, objects, time-lapse through pvlib, Hosek, the
+# fit through JAX) passed in llvm_ad_rgb.
 #
 # Usage, here (needs the package index):  bash benchmarks/gpu_bundle.sh [ARCHIVE]
 #   (default .gpu/site-py312.tar.xz; add /.gpu/ to .git/info/exclude to keep it out of git)
