@@ -21,7 +21,8 @@ PACKAGES="mitsuba drjit OpenEXR colour-science pvlib zarr numcodecs donfig dask 
           nanodisort miepython pytz tzdata locket tblib tornado zict partd google-crc32c nanobind-backend"
 
 work=$(mktemp -d)
-trap 'rm -rf "$work"' EXIT
+tmp="$ARCHIVE.partial"
+trap 'rm -rf "$work" "$tmp"' EXIT
 site="$work/site-py312"
 pins=()
 for name in $PACKAGES; do
@@ -50,7 +51,6 @@ find "$site" -type d \( -name htmlcov -o -name __pycache__ \) -prune -exec rm -r
 find "$site/pvlib/data" -type f ! -name 'ASTMG173.csv' -delete
 
 mkdir -p "$(dirname "$ARCHIVE")"
-tmp="$ARCHIVE.partial"
 tar -C "$work" -cJf "$tmp" site-py312
 mv "$tmp" "$ARCHIVE"
 echo "gpu_bundle: $ARCHIVE ($(du -h "$ARCHIVE" | cut -f1)): ${pins[*]}"

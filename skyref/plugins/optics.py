@@ -235,11 +235,7 @@ class AtmosphereOptics:
         constituents' ``phases`` (:meth:`component_phases`). A path's weight multiplies it by
         the transmittance over the sampling densities of the point and direction; no division by
         sigma_s, which :meth:`phase` needs."""
-        total = 0.0
-        for part, p in zip(sigma_s_parts, phases):
-            if part is not None:
-                total = part * p if isinstance(total, float) else total + part * p
-        return total
+        return sum((part * p for part, p in zip(sigma_s_parts, phases) if part is not None), 0.0)
 
     def phase(self, sigma_s_parts, sigma_s, mu):
         """The local mixture phase function per channel: sum_i sigma_s,i p_i(mu) / sigma_s."""
