@@ -342,12 +342,13 @@ class LineIntegral:
         #: Polarized: the scattered sunlight comes as its P11 and P12 parts (:meth:`_phase_elements`).
         self.polarized = bool(polarized)
 
-    def _phase_elements(self, channels, cos_scatter):
+    def _phase_elements(self, cos_scatter):
         """Per constituent (None for an absorber), the phase-matrix elements the scattered
         sunlight needs at ``cos_scatter``: (P11,), or (P11, P12) when polarized (unpolarized
         sunlight scattered by F is F (1, 0, 0, 0)^T = (P11, P12, 0, 0)^T)."""
-        return [None if s is None else (c.phase_matrix(cos_scatter)[:2] if self.polarized else (c.phase(cos_scatter),))
-                for c, (s, _) in zip(self.optics.components, channels.coefficients)]
+        if not self.polarized:
+            return [None if p is None else (p,) for p in self.optics.component_phases(cos_scatter)]
+        return [None if c.model.phase is None else c.phase_matrix(cos_scatter)[:2] for c in self.optics.components]
 
     # --- the segment's panels ----------------------------------------------------------------
 
@@ -418,7 +419,7 @@ class LineIntegral:
         optics, rule = self.optics, self.rule
         components = optics.components
         panels, lit = self._panels(channels, p, d, h, length, sun, rising_only, sunlight)
-        phase = self._phase_elements(channels, dr.dot(d, sun))
+        phase = self._phase_elements(dr.dot(d, sun))
         extinction = channels.extinction
         light = [channels.zeros() for _ in range(2 if self.polarized else 1)]
         prefix = [mi.Float(0.0) for _ in components]
