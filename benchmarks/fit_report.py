@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import dataclasses
 import datetime
 import os
 import platform
@@ -102,13 +101,6 @@ def ensure_fit(dataset, coefficients):
         sys.exit(f"skyref fit failed (exit status {code})")
 
 
-def select(training, mask):
-    """The skies of a training set where ``mask`` ``(S,)`` is True."""
-    return dataclasses.replace(training, **{name: getattr(training, name)[mask] for name in (
-        "sun_directions", "solar_elevation", "turbidity", "albedo", "sun_angular_radius", "radiance",
-        "standard_error")})
-
-
 def elevation_deg(training) -> np.ndarray:
     """(S,) solar elevation of each sky, degrees (rounded, to group skies by it)."""
     return np.round(np.degrees(training.solar_elevation), 6)
@@ -122,7 +114,7 @@ def turbidity(training) -> np.ndarray:
 def grouped_statistics(table, training, keys) -> dict:
     """{key: {channel: statistics}} of :func:`error_summary` over the skies sharing each key
     (``keys``: one hashable per sky)."""
-    return {key: error_summary(table, select(training, np.array([k == key for k in keys])))["channels"]
+    return {key: error_summary(table, training.select(np.array([k == key for k in keys])))["channels"]
             for key in sorted(set(keys))}
 
 
@@ -431,9 +423,9 @@ def plot_skies(skies, training_sets, tables, path):
         truth = rgb.radiance[sky].reshape(shape + (3,))
         exposure = default_exposure(truth)
         images = [tonemap_srgb8(truth, exposure)] + [
-            tonemap_srgb8(model_radiance(tables[m]["rgb"], select(rgb, mask))[0].reshape(shape + (3,)), exposure)
+            tonemap_srgb8(model_radiance(tables[m]["rgb"], rgb.select(mask))[0].reshape(shape + (3,)), exposure)
             for m in imaged]
-        errors = [100 * relative_errors(tables[m]["xyz"], select(xyz, mask))[0][0, :, y].reshape(shape)
+        errors = [100 * relative_errors(tables[m]["xyz"], xyz.select(mask))[0][0, :, y].reshape(shape)
                   for m in error_models]
         rows.append((sky, images, errors))
     magnitudes = np.abs(np.concatenate([e.ravel() for _, _, es in rows for e in es]))

@@ -153,6 +153,14 @@ def test_a_group_an_unfinished_batch_leaves_short_is_not_fitted():
         6: "too few elevations of its albedo and turbidity rendered", 7: "too few elevations of its albedo and "
         "turbidity rendered"}
     assert result.fitted[training.channel_indices[0], :, TURBIDITY].tolist() == [True, False]
+    # What skyref fit prints covers the skies it fitted: the two rendered skies of the short group
+    # keep the start table's values, whose error is not the fit's.
+    from skyref.fit.cli import _fit_summary_lines, _summary_lines
+
+    printed = _fit_summary_lines("test", result, training)
+    assert "(the 6 skies fitted; 2 rendered skies left out" in printed[0]
+    assert printed[1:] == _summary_lines("test", result.table, training.select(albedos == 0.0))[1:]
+    assert printed[2] != _summary_lines("test", result.table, training)[2]   # the left-out skies differ
 
 
 def test_an_unfinished_batch_is_said_to_be_one():

@@ -82,13 +82,15 @@ def noise_line(training) -> str:
             f"{100 * np.median(finite):.2f}%, 95th percentile {100 * np.percentile(finite, 95):.2f}%" + coverage)
 
 
-def _summary_lines(name, table, training) -> list[str]:
+def _summary_lines(name, table, training, skies: str | None = None) -> list[str]:
+    """The error table of ``table`` against ``training``; ``skies`` says which skies it covers
+    (default: how many of the training set's have data)."""
     # Lazy: skyref.fit.evaluate imports colour-science (seconds, through skyref.audit.metrics), and
     # ``skyref --help`` imports this module.
     from skyref.fit.evaluate import error_summary
 
     summary = error_summary(table, training)
-    lines = [f"{name} vs {training.kind} ground truth ({_skies_text(training)}): relative error, %",
+    lines = [f"{name} vs {training.kind} ground truth ({skies or _skies_text(training)}): relative error, %",
              f"  {'channel':>8} {'mean':>8} {'rms':>8} {'p95':>8} {'max':>8}   (truth's noise: rms, p95)"]
     for channel, stats in summary["channels"].items():
         if stats is None:
@@ -123,6 +125,17 @@ def _progress(quiet: bool):
         if done >= total:
             bar.close()
     return update
+
+
+def _fit_summary_lines(name, result, training) -> list[str]:
+    """:func:`_summary_lines` of a fit over the skies it fitted: a sky it left out keeps the
+    start table's values (in an unfinished batch, a rendered sky whose albedo and turbidity
+    have too few elevations so far), and its error would be the start table's."""
+    used = np.array([s not in result.skipped for s in range(len(training.solar_elevation))], dtype=bool)
+    short = sum(why.startswith("too few elevations") for why in result.skipped.values())
+    skies = f"the {int(used.sum())} skies fitted" + (
+        f"; {short} rendered skies left out, their albedo and turbidity still short of elevations" if short else "")
+    return _summary_lines(name, result.table, training.select(used), skies)
 
 
 def _evaluate(args, training_sets) -> int:
@@ -183,7 +196,7 @@ def _fit(args, training_sets) -> int:
             print(f"{FORM_NAMES[form]} {kind}: fitted in {sum(result.timings.values()):.1f} s "
                   f"({', '.join(f'{k} {v:.1f} s' for k, v in result.timings.items())}); "
                   f"unconverged problems: {result.unconverged}")
-            print("\n".join(_summary_lines(f"{FORM_NAMES[form]} fit", result.table, training)))
+            print("\n".join(_fit_summary_lines(f"{FORM_NAMES[form]} fit", result, training)))
         metadata = {"source": f"skyref fit of {os.path.abspath(args.grid)}", "training": args.grid,
                     "joint_refinement": not args.no_joint, "joint_prior_weight": args.joint_prior_weight, "fits": runs,
                     "truth": truth}

@@ -29,7 +29,7 @@ from __future__ import annotations
 import json
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -119,6 +119,12 @@ class TrainingSet:
         valid = np.isfinite(self.radiance) & (self.radiance > 0.0) & off_disk[..., None]
         relative = self.solid_angle / self.solid_angle.mean()
         return np.where(valid, relative[None, :, None], 0.0)
+
+    def select(self, mask) -> "TrainingSet":
+        """The skies where ``mask`` ``(S,)`` is True."""
+        return replace(self, **{name: getattr(self, name)[mask] for name in (
+            "sun_directions", "solar_elevation", "turbidity", "albedo", "sun_angular_radius", "radiance",
+            "standard_error")})
 
     def relative_noise(self) -> np.ndarray:
         """(S, P, C) standard error / radiance of the data (NaN where unweighted)."""
