@@ -205,9 +205,20 @@ MAX_LANE_VALUES = 1 << 27
 #: Offset between the seed of a render's paths and that of its single-scattering launch.
 SINGLE_SCATTERING_SEED = 0x9E3779B9
 
-#: Paths per sample of the camera segment's light when the camera direction is fixed (only the
-#: point in the sun's disk varies): the single-scattering launch costs at most ~1/8 more.
-PATHS_PER_SINGLE_SCATTERING_SAMPLE = 8
+
+def single_scattering_samples(spp: int) -> int:
+    """Samples of the camera segment's light per target and batch, for ``spp`` paths, when the
+    camera direction is fixed (only the point in the sun's disk varies): about sqrt(spp) / 2, as
+    a power of two (the scrambled Sobol points' balanced counts).
+
+    Why that many: its variance falls about as n^-2.5 in its n points (they integrate a smooth
+    function of the 2D disk), the paths' as 1 / spp, so a share of the render's variance that is
+    small at a few paths shrinks as spp grows. Measured (512 directions, 16 batches, share of the
+    render's relative variance): sunset (sun 88, RGB) at spp 16 and n 2, 3.3% (n 1: 25%); at spp
+    256, n 8: 1.4%; twilight (sun 96) 1.6% and 0.5%; clear and hazy skies, and turbidity 3 and 6
+    under suns at zenith 88.6-90 at 21 wavelengths, at most 0.4%. At one sample per 8 paths, as
+    before, it took 9-16% of a render's CPU (clear and sunset RGB, 21 wavelengths)."""
+    return 1 << max(0, round(math.log2(math.sqrt(max(spp, 1)) / 2.0)))
 
 
 class PathVertex:
@@ -593,14 +604,13 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
 
         With the line-integral estimator and ``fixed_directions`` (one direction per target), the
         camera segment's light (solar disk, single scattering) depends only on the point drawn
-        in the sun's disk: it is traced in its own launches with one sample per
-        ``PATHS_PER_SINGLE_SCATTERING_SAMPLE`` paths per target and batch, and the ``spp`` paths
-        carry orders >= 2 only."""
+        in the sun's disk: it is traced in its own launches, :func:`single_scattering_samples`
+        per target and batch, and the ``spp`` paths carry orders >= 2 only."""
         if self.estimator != "line_integral" or self.objects is not None or not fixed_directions:
             return self._launches(seed, targets, spp, batches, camera_rays, "all", progress)
         image = self._launches(seed, targets, spp, batches, camera_rays, "multiple", progress)
         image += self._launches((seed + SINGLE_SCATTERING_SEED) % (1 << 32), targets,
-                                -(-spp // PATHS_PER_SINGLE_SCATTERING_SAMPLE), batches, camera_rays, "single")
+                                single_scattering_samples(spp), batches, camera_rays, "single")
         return image
 
     def launch_sizes(self, targets: int, spp: int, batches: int = 1) -> list:
