@@ -16,7 +16,7 @@ from skyref.analytic.hosek import published_table
 from skyref.batch.provenance import batch_skies, describe_truth, truth_provenance
 from skyref.errors import ParameterError
 from skyref.fit.export import read_tables, write_tables
-from skyref.fit.fitter import PRIOR_WEIGHT, fit_table
+from skyref.fit.fitter import PRIOR_WEIGHT, SHORT_GROUP, fit_table
 from skyref.fit.training import load_batch_dataset
 from skyref.validation import check_number, check_output_directory
 
@@ -132,7 +132,7 @@ def _fit_summary_lines(name, result, training) -> list[str]:
     start table's values (in an unfinished batch, a rendered sky whose albedo and turbidity
     have too few elevations so far), and its error would be the start table's."""
     used = np.array([s not in result.skipped for s in range(len(training.solar_elevation))], dtype=bool)
-    short = sum(why.startswith("too few elevations") for why in result.skipped.values())
+    short = sum(why == SHORT_GROUP for why in result.skipped.values())
     skies = f"the {int(used.sum())} skies fitted" + (
         f"; {short} rendered skies left out, their albedo and turbidity still short of elevations" if short else "")
     return _summary_lines(name, result.table, training.select(used), skies)

@@ -72,7 +72,7 @@ from skyref.extras import require
 from skyref.fit import forms
 
 __all__ = ["ATOL", "BATCH_SIZE", "GAUGE_WEIGHT", "GRID_TOLERANCE", "MAX_STEPS", "POSITIVE_EPSILON", "PRIOR_WEIGHT",
-           "RTOL", "FitResult", "default_start", "fit_table"]
+           "RTOL", "SHORT_GROUP", "FitResult", "default_start", "fit_table"]
 
 #: eps of the positive part of F (see the module's documentation), relative to L_M.
 POSITIVE_EPSILON = 1e-6
@@ -96,6 +96,9 @@ PRIOR_WEIGHT = 1.0
 GAUGE_WEIGHT = 100.0
 #: Configurations match the table's turbidities and albedos to this tolerance.
 GRID_TOLERANCE = 1e-6
+#: Why a rendered sky is not fitted (``FitResult.skipped``) when an unfinished batch has rendered
+#: too few elevations of its albedo and turbidity for a Bezier curve: it keeps the start values.
+SHORT_GROUP = "too few elevations of its albedo and turbidity rendered (unfinished batch?)"
 
 
 @dataclass
@@ -387,7 +390,7 @@ def fit_table(training, form: str = "hosek", start: CoefficientTable | None = No
                                          "turbidity", f"too few for albedo {ALBEDOS[a]:g}, turbidity {TURBIDITIES[t]:g}")
                 short |= group
                 for s in skies[group]:
-                    skipped[int(s)] = "too few elevations of its albedo and turbidity rendered (unfinished batch?)"
+                    skipped[int(s)] = SHORT_GROUP
     skies, albedo_index, turbidity_index = skies[~short], albedo_index[~short], turbidity_index[~short]
     if skies.size == 0:
         raise ParameterError("training", training.source, f"a group of {CONTROL_POINTS} or more elevations of one "
