@@ -42,7 +42,7 @@ ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 
 def complete_groups(training):
     """The skies of the (albedo, turbidity) groups every sky of which has data."""
-    has_data = np.isfinite(training.radiance).any(axis=(1, 2))
+    has_data = training.rendered
     keys = list(zip(training.turbidity, training.albedo))
     complete = {key for key in set(keys) if all(h for k, h in zip(keys, has_data) if k == key)}
     return training.select(np.array([key in complete for key in keys]))

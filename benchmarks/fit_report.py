@@ -482,7 +482,7 @@ def main():
     log(f"loading the ground truth from {args.dataset}")
     training_sets = load_batch_dataset(args.dataset)
     any_set = next(iter(training_sets.values()))
-    rendered = np.isfinite(any_set.radiance).any(axis=(1, 2))
+    rendered = any_set.rendered
     if not rendered.all():
         sys.exit(f"ground truth incomplete: {int(rendered.sum())}/{rendered.size} skies rendered; finish "
                  "`skyref batch grids/hosek_training.toml` first")

@@ -60,7 +60,7 @@ def _kinds(text: str, available) -> list[str]:
 
 def _skies_with_data(training) -> int:
     """How many of the training set's skies have any radiance (an unfinished batch has fewer)."""
-    return int(np.isfinite(training.radiance).any(axis=(1, 2)).sum())
+    return int(training.rendered.sum())
 
 
 def _skies_text(training) -> str:

@@ -120,6 +120,11 @@ class TrainingSet:
         relative = self.solid_angle / self.solid_angle.mean()
         return np.where(valid, relative[None, :, None], 0.0)
 
+    @property
+    def rendered(self) -> np.ndarray:
+        """(S,) True where a sky has any radiance (an unfinished batch has skies with none)."""
+        return np.isfinite(self.radiance).any(axis=(1, 2))
+
     def select(self, mask) -> "TrainingSet":
         """The skies where ``mask`` ``(S,)`` is True."""
         return replace(self, **{name: getattr(self, name)[mask] for name in (
