@@ -39,7 +39,7 @@ import numpy as np
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
 from skyref.analytic.hosek import CHANNELS, published_table  # noqa: E402
-from skyref.audit.metrics import NOISE_RATIO, _statistics  # noqa: E402
+from skyref.audit.metrics import NOISE_RATIO, _statistics, shared_estimates  # noqa: E402
 from skyref.color import default_exposure, tonemap_srgb8  # noqa: E402
 from skyref.fit.cli import FORM_NAMES, noise_line, truth_metadata  # noqa: E402
 from skyref.fit.evaluate import (error_summary, interpolation_gap, model_radiance, relative_errors,  # noqa: E402
@@ -129,11 +129,13 @@ def region_statistics(table, training) -> dict:
     """{region: statistics} over every channel of the kind pooled, plus "median" |error| and
     "share" (of the fitted directions' solid angle)."""
     error, noise = relative_errors(table, training)
+    estimates = shared_estimates(training.radiance, training.standard_error)     # (S, P)
+    channels = np.arange(error.shape[-1])
     weights = training.weights()
     found = {}
     for region, mask in region_masks(training).items():
         e, n = error[mask], noise[mask]
-        stats = _statistics(e.ravel(), n.ravel())
+        stats = _statistics(e.ravel(), n.ravel(), (estimates[mask][:, None] * channels.size + channels).ravel())
         if stats is not None:
             stats["median"] = float(np.nanmedian(np.abs(e)))
             stats["share"] = float(weights[mask].sum() / weights.sum())

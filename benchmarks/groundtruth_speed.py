@@ -93,9 +93,10 @@ clock = time.process_time
 def time_integrator(scene, spp, estimator, scale):
     # compile first: one sample per batch launches the timed render's kernels (they do not
     # depend on the launch size, tests/test_integrator_plugin.py)
-    render_sky(scene, spp=BATCHES, passes=BATCHES, seed=2, estimator=estimator)
+    # every pixel traced (symmetry=False): this measures the estimators per direction, as volpath pays
+    render_sky(scene, spp=BATCHES, passes=BATCHES, seed=2, estimator=estimator, symmetry=False)
     start = clock()
-    sky = render_sky(scene, spp=BATCHES * spp * scale, passes=BATCHES, seed=1, estimator=estimator)
+    sky = render_sky(scene, spp=BATCHES * spp * scale, passes=BATCHES, seed=1, estimator=estimator, symmetry=False)
     return clock() - start, sky
 
 

@@ -29,12 +29,13 @@ from skyref.plugins import load_mitsuba
 from skyref.projection import camera_to_world, pixel_directions
 from skyref.scene import RenderSettings
 from skyref.sky import ORDER_NAMES, STOKES, Sky
+from skyref.symmetry import view_groups
 from skyref.validation import check_choice, check_number
 
 __all__ = ["MAX_IMAGE_VALUES", "GEOMETRIES", "sensor_dict", "build_integrator", "stokes_components",
            "check_image_size", "render_sky",
            "rendered_pixels", "relative_error_percentile", "pixel_relative_error", "PixelPool",
-           "render_to_error", "ROUND_MARGIN"]
+           "render_to_error", "ROUND_MARGIN", "traced_views"]
 
 #: Most values (passes x pixels x scattering orders x Stokes components (polarized: 4) x
 #: wavelengths) one render accumulates: each takes ~12 bytes across the device buffer and its host
@@ -126,6 +127,18 @@ def rendered_pixels(scene) -> np.ndarray:
     return np.flatnonzero(pixel_directions(camera)[..., 2].reshape(-1) >= 0.0)
 
 
+def traced_views(scene, pixels: np.ndarray, symmetry: bool = True) -> tuple:
+    """Which of the rendered ``pixels`` to trace: (their positions in ``pixels``, and for each
+    pixel the position of its estimate among them). With ``symmetry``, one view of each group
+    that sees the same sky (:func:`skyref.symmetry.view_groups`); else every pixel."""
+    if not symmetry:
+        everything = np.arange(len(pixels))
+        return everything, everything
+    groups = view_groups(scene, pixels)
+    traced = np.unique(groups)
+    return traced, np.searchsorted(traced, groups)
+
+
 class _PixelRenderer:
     """The integrator and sensor of one scene, to trace any set of its pixels in passes; polarized
     if the scene's ``render.polarized`` says so."""
@@ -160,11 +173,13 @@ class _PixelRenderer:
         of the total (M, S, N): the spread of the pass means / sqrt(passes)."""
         return per_pass.mean(axis=0), per_pass.sum(axis=2).std(axis=0, ddof=1) / math.sqrt(per_pass.shape[0])
 
-    def metadata(self, spp: int, passes: int, seed, elapsed: float, samples: int) -> dict:
+    def metadata(self, spp: int, passes: int, seed, elapsed: float, samples: int, views_traced: int) -> dict:
+        """``spp``: samples per pixel; ``samples``: samples traced in all; ``views_traced``: the
+        directions traced (fewer than the pixels where symmetric views share one, :func:`traced_views`)."""
         return {"skyref_version": __version__, "integrator": "atmosphere", "variant": self.mi.variant(),
                 "geometry": self.geometry, "estimator": self.integrator.estimator, "spp": spp, "passes": passes,
                 "seed": seed, "wavelengths_per_path": self.integrator.channels, "region": self.scene.render.region,
-                "render_time_s": elapsed, "samples_per_second": samples / elapsed}
+                "views_traced": views_traced, "render_time_s": elapsed, "samples_per_second": samples / elapsed}
 
 
 def _sky(scene, pixels, radiance, standard_error, orders, metadata) -> Sky:
@@ -196,7 +211,8 @@ def _sky(scene, pixels, radiance, standard_error, orders, metadata) -> Sky:
 
 def render_sky(scene, spp: int | None = None, passes: int | None = None, seed: int | None = None,
                variant: str | None = None, geometry: str = "spherical", wavelengths_per_path: int = 0,
-               progress: bool = False, estimator: str | None = None, polarized: bool | None = None) -> Sky:
+               progress: bool = False, estimator: str | None = None, polarized: bool | None = None,
+               symmetry: bool = True) -> Sky:
     """Render ``scene``; ``spp``, ``passes``, ``seed`` and ``polarized`` override the scene's
     render settings.
 
@@ -207,7 +223,8 @@ def render_sky(scene, spp: int | None = None, passes: int | None = None, seed: i
     planet (for comparisons with plane-parallel solvers such as DISORT); ``estimator`` picks
     the integrator's estimator (:data:`skyref.scene.ESTIMATORS`; default: the scene's
     ``render.estimator``). ``polarized`` transports Stokes vectors (either estimator): the sky
-    then also has ``stokes`` (H, W, 4, N) and its radiance is I.
+    then also has ``stokes`` (H, W, 4, N) and its radiance is I. ``symmetry``: views that see
+    the same sky share one estimate (:mod:`skyref.symmetry`; the metadata's ``views_traced``).
     """
     settings = _settings(scene, spp, passes, seed, polarized, estimator)
     if settings.spp < settings.passes:
@@ -215,6 +232,7 @@ def render_sky(scene, spp: int | None = None, passes: int | None = None, seed: i
     scene = scene.replace(render=settings)
     renderer = _PixelRenderer(scene, variant, geometry, wavelengths_per_path)
     pixels = rendered_pixels(scene)
+    traced, estimate_of = traced_views(scene, pixels, symmetry)
     spp_per_pass = settings.spp // settings.passes
 
     bar, advance = None, None
@@ -228,14 +246,16 @@ def render_sky(scene, spp: int | None = None, passes: int | None = None, seed: i
             bar.set_postfix_str("", refresh=False)
             bar.update(count * settings.passes)
     start = time.perf_counter()
-    per_pass = renderer.passes(pixels, spp_per_pass, settings.passes, settings.seed, advance)
+    per_pass = renderer.passes(pixels[traced], spp_per_pass, settings.passes, settings.seed, advance)
     elapsed = time.perf_counter() - start
     if bar is not None:
         bar.close()
 
     orders, standard_error = renderer.statistics(per_pass)
+    orders, standard_error = orders[estimate_of], standard_error[estimate_of]
     spp_total = spp_per_pass * settings.passes
-    metadata = renderer.metadata(spp_total, settings.passes, settings.seed, elapsed, pixels.size * spp_total)
+    metadata = renderer.metadata(spp_total, settings.passes, settings.seed, elapsed, traced.size * spp_total,
+                                 traced.size)
     return _sky(scene, pixels, orders.sum(axis=1), standard_error, orders, metadata)
 
 
@@ -289,7 +309,7 @@ class PixelPool:
 
 
 def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, initial_spp: int | None = None,
-                    variant: str | None = None) -> Sky:
+                    variant: str | None = None, symmetry: bool = True) -> Sky:
     """Render ``scene`` until every rendered pixel's :func:`pixel_relative_error` is at most
     ``target_relative_error``, or it has had ``max_spp`` samples: adaptive per direction, so a
     dark pixel costs its own samples, not the sky's.
@@ -301,7 +321,7 @@ def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, in
     the Hosek training skies, pixels ending at 0.83% for a 1% target in the median), within
     ``max_spp``. The sky's metadata records the mean, smallest and largest samples per pixel,
     the share of pixels at the target and the 95th percentile of the relative error. A polarized scene (``render.polarized``)
-    pools every Stokes component and aims at I's error."""
+    pools every Stokes component and aims at I's error. ``symmetry``: as in :func:`render_sky`."""
     check_number("target_relative_error", target_relative_error, 1e-5, 1.0)
     passes = scene.render.passes
     spp = min(initial_spp or max(16 * passes, 64), max_spp)
@@ -310,19 +330,21 @@ def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, in
     scene = scene.replace(render=_settings(scene, spp, None, seeds[0]))
     renderer = _PixelRenderer(scene, variant, "spherical", 0)
     pixels = rendered_pixels(scene)
-    pool = PixelPool(pixels.size, len(ORDER_NAMES), len(scene.wavelengths_nm), stokes_components(scene))
+    traced, estimate_of = traced_views(scene, pixels, symmetry)
+    views = pixels[traced]
+    pool = PixelPool(views.size, len(ORDER_NAMES), len(scene.wavelengths_nm), stokes_components(scene))
     elapsed, used_seeds = 0.0, []
 
     def trace(members, spp_per_pass, seed):
         nonlocal elapsed
         start = time.perf_counter()
-        per_pass = renderer.passes(pixels[members], spp_per_pass, passes, seed)
+        per_pass = renderer.passes(views[members], spp_per_pass, passes, seed)
         elapsed += time.perf_counter() - start
         pool.add(members, spp_per_pass * passes, *renderer.statistics(per_pass))
 
     for round_index, seed in enumerate(seeds):
         if round_index == 0:
-            trace(np.arange(pixels.size), spp // passes, seed)
+            trace(np.arange(views.size), spp // passes, seed)
         else:
             error = pixel_relative_error(pool.radiance[:, 0], pool.standard_error[:, 0])
             with np.errstate(invalid="ignore", over="ignore"):
@@ -338,12 +360,15 @@ def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, in
                 trace(members, int(count), (seed + 0x9E3779B1 * int(count).bit_length()) % (1 << 31))
         used_seeds.append(seed)
 
-    error = pixel_relative_error(pool.radiance[:, 0], pool.standard_error[:, 0])
-    samples = int(pool.samples.sum())
-    metadata = renderer.metadata(round(samples / max(pixels.size, 1)), passes, used_seeds, elapsed, samples)
+    # per pixel from here on: a pixel that shares its view's estimate has its samples and error
+    error = pixel_relative_error(pool.radiance[:, 0], pool.standard_error[:, 0])[estimate_of]
+    samples = pool.samples[estimate_of]
+    metadata = renderer.metadata(round(samples.sum() / max(pixels.size, 1)), passes, used_seeds, elapsed,
+                                 int(pool.samples.sum()), views.size)
     metadata.update(target_relative_error=target_relative_error,
-                    spp_range=[int(pool.samples.min()), int(pool.samples.max())] if pixels.size else [0, 0],
+                    spp_range=[int(samples.min()), int(samples.max())] if pixels.size else [0, 0],
                     pixels_at_target=float(np.mean(error <= target_relative_error)) if pixels.size else 1.0)
-    sky = _sky(scene, pixels, pool.radiance, pool.standard_error, pool.orders, metadata)
+    sky = _sky(scene, pixels, pool.radiance[estimate_of], pool.standard_error[estimate_of], pool.orders[estimate_of],
+               metadata)
     sky.metadata["relative_error_p95"] = relative_error_percentile(sky)
     return sky

@@ -16,7 +16,9 @@ A statistic is *resolved* when the noise's statistic is at most 1/5 of the error
 Statistics per region (:mod:`skyref.audit.regions`): the signed mean, the noise-corrected RMS,
 the 95th percentile and the maximum of |error| (see :func:`_statistics`). Region means and
 RMS average the truth's noise down over many pixels; p95 and max do not, and are reported as
-noise-limited where they are. Pixels where the truth is black (space seen from orbit) carry no
+noise-limited where they are. Pixels that carry one estimate, copied (a truth rendered with its
+symmetric views traced once, :mod:`skyref.symmetry`), average nothing down: their noise adds
+coherently (:func:`shared_estimates`). Pixels where the truth is black (space seen from orbit) carry no
 relative error.
 
 Scale and shape apart (:func:`scale_statistics`): a model can be right in shape and wrong in
@@ -36,7 +38,7 @@ from skyref.audit.regions import REGIONS
 from skyref.color import ciede2000, spectral_to_linear_srgb, xyz_matrix
 
 __all__ = ["DYNAMIC_RANGE", "MAX_PIXEL_NOISE", "METRICS", "NOISE_RATIO", "SCALE_DEFINITION", "STATISTICS", "ErrorMaps",
-           "best_scale", "error_maps", "region_statistics", "scale_statistics"]
+           "best_scale", "error_maps", "region_statistics", "scale_statistics", "shared_estimates"]
 
 METRICS = ("luminance", "spectral", "delta_e")
 STATISTICS = ("mean", "rms", "p95", "max")
@@ -64,6 +66,20 @@ class ErrorMaps:
     noise: dict          # metric -> (H, W)
     valid: np.ndarray    # (H, W) pixels where the truth is lit and measured and the method finite
     lit: np.ndarray      # (H, W) pixels where the truth is lit (DYNAMIC_RANGE)
+    estimates: np.ndarray  # (H, W) which estimate of the truth each pixel carries (shared_estimates)
+
+
+def shared_estimates(truth_radiance, truth_standard_error) -> np.ndarray:
+    """Labels (the inputs' shape without the last, wavelength axis) of the ground truth's
+    estimates: pixels that carry one estimate, copied to each of them (:mod:`skyref.symmetry`),
+    share a label. They are told by their radiance and standard error being equal bit for bit in
+    every channel, which independent estimates never are (black pixels, with no noise, may share
+    one label too)."""
+    t, se = np.asarray(truth_radiance), np.asarray(truth_standard_error)
+    rows = np.ascontiguousarray(np.concatenate([t.reshape(-1, t.shape[-1]), se.reshape(-1, se.shape[-1])], axis=1))
+    as_bytes = rows.view(np.dtype((np.void, rows.dtype.itemsize * rows.shape[1]))).reshape(-1)
+    _, labels = np.unique(as_bytes, return_inverse=True)
+    return labels.reshape(t.shape[:-1])
 
 
 def error_maps(method_radiance, truth_radiance, truth_standard_error, wavelengths_nm) -> ErrorMaps:
@@ -96,26 +112,37 @@ def error_maps(method_radiance, truth_radiance, truth_standard_error, wavelength
     delta_e_noise = np.where(valid, ciede2000(rgb_noisy, rgb_t, white), np.nan)
     return ErrorMaps(error={"luminance": luminance, "spectral": spectral, "delta_e": delta_e},
                      noise={"luminance": luminance_noise, "spectral": spectral_noise, "delta_e": delta_e_noise},
-                     valid=valid, lit=lit & np.all(np.isfinite(m), axis=-1))
+                     valid=valid, lit=lit & np.all(np.isfinite(m), axis=-1),
+                     estimates=shared_estimates(t, se))
 
 
-def _statistics(error, noise) -> dict:
+def _statistics(error, noise, estimates=None) -> dict:
     """Statistics of one metric over a region's pixels, each beside the ground truth's noise on
     it. ``mean`` is the signed mean (its noise: sqrt(sum n_i^2) / n); ``rms`` is the root mean
     square with the truth's noise variance removed, sqrt(max(0, mean(e^2) - mean(n^2))) (its
-    noise: the standard error of that estimate, from the delta method); ``p95`` and ``max`` are
-    of |e| per pixel, their noise the same statistic of the per-pixel noise n."""
+    noise: the standard error of that estimate, from the delta method, sqrt(sum 4 e_i^2 n_i^2 +
+    2 n_i^4) / n); ``p95`` and ``max`` are of |e| per pixel, their noise the same statistic of
+    the per-pixel noise n. ``estimates``: labels of the truth's estimates (:func:`shared_estimates`);
+    pixels that share one share its noise draw, so in the sums above their terms n_i and 2 e_i n_i
+    add before they are squared (and the n_i^2 before the n^4 term's). None: every pixel its own."""
     keep = np.isfinite(error) & np.isfinite(noise)
     e, n = error[keep], noise[keep]
     if e.size == 0:
         return None
     count = e.size
+    if estimates is None:
+        coherent = np.asarray
+    else:
+        _, label = np.unique(np.asarray(estimates)[keep], return_inverse=True)
+
+        def coherent(values):
+            return np.bincount(label.reshape(-1), weights=values)
     mean_square = float(np.mean(e * e) - np.mean(n * n))
     rms = float(np.sqrt(max(mean_square, 0.0)))
-    ms_noise = float(np.sqrt(np.sum(4.0 * e * e * n * n + 2.0 * n ** 4)) / count)
+    ms_noise = float(np.sqrt(np.sum(coherent(2.0 * e * n) ** 2 + 2.0 * coherent(n * n) ** 2)) / count)
     a = np.abs(e)
     scale = max(2.0 * rms, float(np.sqrt(ms_noise)))                  # 0 only for exact, noiseless data
-    return {"mean": float(e.mean()), "noise_mean": float(np.sqrt(np.sum(n * n)) / count),
+    return {"mean": float(e.mean()), "noise_mean": float(np.sqrt(np.sum(coherent(n) ** 2)) / count),
             "rms": rms, "noise_rms": ms_noise / scale if scale > 0.0 else 0.0,
             "p95": float(np.percentile(a, 95.0)), "noise_p95": float(np.percentile(n, 95.0)),
             "max": float(a.max()), "noise_max": float(n.max())}
@@ -136,7 +163,7 @@ def region_statistics(maps: ErrorMaps, masks: dict) -> dict:
         row = {"pixels": int(mask.sum()), "unmeasured": unmeasured}
         covered = unmeasured <= row["pixels"]
         for metric in METRICS:
-            entry = _statistics(maps.error[metric][mask], maps.noise[metric][mask])
+            entry = _statistics(maps.error[metric][mask], maps.noise[metric][mask], maps.estimates[mask])
             if metric == "delta_e":
                 entry["noise_mean"] = float(np.mean(maps.noise[metric][mask]))
             for stat in STATISTICS:
@@ -174,7 +201,7 @@ def scale_statistics(maps: ErrorMaps, method_radiance, truth_radiance, mask) -> 
     error, noise = maps.error["luminance"][keep], maps.noise["luminance"][keep]
     result = {"factor": factor}
     for key, e in (("rms", error), ("rms_scaled", factor * (1.0 + error) - 1.0)):
-        entry = _statistics(e, noise)
+        entry = _statistics(e, noise, maps.estimates[keep])
         result.update({key: entry["rms"], f"noise_{key}": entry["noise_rms"],
                        f"resolved_{key}": bool(entry["noise_rms"] * NOISE_RATIO <= entry["rms"])})
     return result

@@ -180,7 +180,8 @@ class PathTracerView:
         if len(directions) != expected:
             raise ParameterError("directions", f"{len(directions)} directions",
                                  f"the {expected} pixel directions of the scene's camera", "the path tracer renders its camera")
-        sky = render_sky(self.scene, spp=self.spp, passes=2, seed=self.seed)
+        # every direction traced (symmetry=False): a frame's directions need not come in mirror pairs
+        sky = render_sky(self.scene, spp=self.spp, passes=2, seed=self.seed, symmetry=False)
         radiance = sky.radiance - sky.orders.get("sun_direct", 0.0)
         return radiance.reshape(expected, -1).astype(np.float64)
 

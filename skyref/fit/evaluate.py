@@ -18,7 +18,7 @@ import time
 import numpy as np
 
 from skyref.analytic.hosek import ALBEDOS, TURBIDITIES
-from skyref.audit.metrics import _statistics
+from skyref.audit.metrics import _statistics, shared_estimates
 from skyref.extras import require
 
 __all__ = ["error_summary", "interpolation_gap", "model_radiance", "relative_errors", "throughput"]
@@ -47,13 +47,15 @@ def error_summary(table, training) -> dict:
     [{"solar_elevation_deg", "turbidity", "albedo", "channels": {channel: stats}}, ...]}``
     (stats as :func:`skyref.audit.metrics._statistics`; None where a sky has no used direction)."""
     error, noise = relative_errors(table, training)
-    summary = {"channels": {c: _statistics(error[..., i], noise[..., i]) for i, c in enumerate(training.channels)},
-               "skies": []}
+    estimates = shared_estimates(training.radiance, training.standard_error)      # (S, P)
+    summary = {"channels": {c: _statistics(error[..., i], noise[..., i], estimates)
+                            for i, c in enumerate(training.channels)}, "skies": []}
     for s in range(len(training.solar_elevation)):
         summary["skies"].append({
             "solar_elevation_deg": float(np.degrees(training.solar_elevation[s])),
             "turbidity": float(training.turbidity[s]), "albedo": float(training.albedo[s]),
-            "channels": {c: _statistics(error[s, :, i], noise[s, :, i]) for i, c in enumerate(training.channels)}})
+            "channels": {c: _statistics(error[s, :, i], noise[s, :, i], estimates[s])
+                         for i, c in enumerate(training.channels)}})
     return summary
 
 

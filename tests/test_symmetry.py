@@ -1,0 +1,121 @@
+"""Views that see the same sky (skyref.symmetry): which pixels pair up, that a render tracing one of
+each pair agrees with one tracing every pixel, and that statistics over pixels add the noise of
+a shared estimate coherently (skyref.audit.metrics)."""
+
+import numpy as np
+import pytest
+
+from skyref.audit.metrics import _statistics, shared_estimates
+from skyref.render import render_sky, render_to_error, rendered_pixels
+from skyref.scene import Camera, RenderSettings, Scene, SceneObject, Sun
+from skyref.symmetry import view_groups
+
+
+def scene_with(sun, width=64, height=32, **render):
+    settings = {"pixel_sampling": "centre", **render}
+    return Scene(sun=sun, camera=Camera(width=width, height=height), wavelengths="rgb",
+                 render=RenderSettings(**settings))
+
+
+def pixel_angles(width, height):
+    """(zenith, azimuth) in degrees of each pixel centre of an equirectangular camera, flat, from
+    its definition (rows from the zenith, columns from azimuth 0): independent of skyref.projection."""
+    zenith = np.repeat((np.arange(height) + 0.5) * 180.0 / height, width)
+    azimuth = np.tile((np.arange(width) + 0.5) * 360.0 / width, height)
+    return zenith, azimuth
+
+
+@pytest.mark.parametrize("sun_azimuth", [180.0, 182.8125])
+def test_each_pixel_shares_the_estimate_of_its_mirror_image_across_the_sun_vertical(sun_azimuth):
+    """Sun at azimuth 180 (on a column edge of 64 columns of 5.625 deg): every column has a
+    partner; at 182.8125 (a column centre, the Hosek training grid's), the sun's column and the
+    one opposite are their own mirror images: 33 views per row instead of 64."""
+    scene = scene_with(Sun(60.0, sun_azimuth))
+    pixels = rendered_pixels(scene)
+    groups = view_groups(scene, pixels)
+    zenith, azimuth = pixel_angles(64, 32)
+    mirror = np.mod(2.0 * sun_azimuth - azimuth, 360.0)
+    # the pixel whose estimate each one takes has its zenith and its own or its mirror azimuth
+    taken = groups
+    assert np.array_equal(zenith[taken], zenith)
+    same = np.isclose(azimuth[taken], azimuth) | np.isclose(azimuth[taken], mirror)
+    assert same.all()
+    expected = 32 * 32 if sun_azimuth == 180.0 else 32 * 33
+    assert np.unique(groups).size == expected
+
+
+def test_with_the_sun_at_the_zenith_a_row_is_one_view():
+    scene = scene_with(Sun(0.0, 180.0))
+    groups = view_groups(scene, rendered_pixels(scene))
+    assert np.array_equal(groups, np.repeat(np.arange(32) * 64, 64))
+
+
+@pytest.mark.parametrize("case", ["sun off the columns' symmetry", "area sampling", "polarized", "object"])
+def test_no_view_is_shared_where_the_symmetry_does_not_hold_or_the_copy_would_differ(case):
+    scene = {"sun off the columns' symmetry": scene_with(Sun(60.0, 10.0)),
+             "area sampling": scene_with(Sun(60.0, 180.0), pixel_sampling="area"),
+             "polarized": scene_with(Sun(60.0, 180.0), polarized=True),
+             "object": scene_with(Sun(60.0, 180.0)).replace(objects=(SceneObject("sphere", scale_m=(10.0, 10.0, 10.0),
+                                                                                    translate_m=(50.0, 0.0, 20.0)),))}[case]
+    pixels = rendered_pixels(scene)
+    assert np.array_equal(view_groups(scene, pixels), np.arange(pixels.size))
+
+
+@pytest.mark.parametrize("sun", [Sun(60.0, 180.0), Sun(0.0, 180.0)], ids=["mirror", "zenith sun"])
+def test_a_symmetric_render_agrees_with_one_that_traces_every_pixel(mi, sun):
+    """Delta tracking (the mapping is the subject, not the estimator), 16x8 pixels: the copies
+    are bit-identical, and every pixel agrees with an independent render of every pixel within
+    the standard errors. A wrong partner (a pixel towards the sun for one away from it) differs
+    by tens of percent, hundreds of standard errors at these ~1-3% errors."""
+    scene = scene_with(sun, 16, 8, estimator="delta_tracking")
+    symmetric = render_sky(scene, spp=4096, passes=16, seed=7)
+    everything = render_sky(scene, spp=4096, passes=16, seed=8, symmetry=False)
+    assert symmetric.metadata["views_traced"] == (64 if sun.zenith_deg else 8)
+    assert everything.metadata["views_traced"] == 128
+    flat = symmetric.radiance.reshape(128, -1)
+    groups = view_groups(scene, np.arange(128))
+    assert np.array_equal(flat, flat[groups])
+    z = (symmetric.radiance - everything.radiance) / np.hypot(symmetric.standard_error, everything.standard_error)
+    assert np.all(np.isfinite(z)) and np.max(np.abs(z)) < 4.5, np.max(np.abs(z))
+    assert 0.6 < np.mean(z ** 2) < 1.5, np.mean(z ** 2)
+
+
+def test_an_adaptive_render_counts_samples_and_targets_per_pixel(mi):
+    """render_to_error traces one view of each pair: the metadata's samples per pixel, their
+    range and the share at the target are those of the pixels (each copy has its view's), the
+    views traced half of them."""
+    scene = scene_with(Sun(40.0, 180.0), 8, 6, passes=16, estimator="delta_tracking")
+    sky = render_to_error(scene, 0.02, seeds=[11, 12, 13], max_spp=4096)
+    assert sky.metadata["views_traced"] == 24
+    flat = sky.radiance.reshape(48, -1)
+    assert np.array_equal(flat, flat[view_groups(scene, np.arange(48))])
+    worst = np.max(sky.standard_error / sky.radiance, axis=-1)
+    assert sky.metadata["pixels_at_target"] == pytest.approx(np.mean(worst <= 0.02))
+
+
+def test_shared_estimates_are_told_by_equal_values_in_every_channel():
+    truth = np.array([[1.0, 2.0], [1.0, 2.0], [1.0, 2.5], [0.0, 0.0]])
+    error = np.array([[0.1, 0.1], [0.1, 0.1], [0.1, 0.1], [0.0, 0.0]])
+    labels = shared_estimates(truth, error)
+    assert labels[0] == labels[1] and len({labels[0], labels[2], labels[3]}) == 3
+
+
+def test_the_noise_of_a_region_adds_coherently_over_a_shared_estimate():
+    """The noise _statistics states for the mean and the noise-corrected mean square against the
+    spread of those statistics over simulated truths in which pairs of pixels carry one noise
+    draw: copies double the variance of the mean, which the independent formula would miss."""
+    rng = np.random.default_rng(3)
+    pixels = 400
+    error_true = rng.normal(0.05, 0.03, pixels)
+    noise = rng.uniform(0.01, 0.03, pixels // 2).repeat(2)               # pairs share a noise level
+    estimates = np.arange(pixels) // 2
+    draws = rng.standard_normal((4000, pixels // 2)).repeat(2, axis=1)  # and a noise draw
+    observed = error_true + noise * draws
+    means, squares = observed.mean(axis=1), np.mean(observed ** 2, axis=1)
+    stated = _statistics(observed[0], noise, estimates)
+    independent = _statistics(observed[0], noise)
+    assert stated["noise_mean"] == pytest.approx(means.std(), rel=0.05)
+    assert independent["noise_mean"] == pytest.approx(means.std() / np.sqrt(2.0), rel=0.05)
+    # the RMS's noise is that of the mean square over 2 rms (the delta method)
+    rms_noise = squares.std() / (2.0 * np.sqrt(max(stated["rms"] ** 2, 1e-12)))
+    assert stated["noise_rms"] == pytest.approx(rms_noise, rel=0.15)
