@@ -13,7 +13,7 @@ beside the ground truth's own noise; statistics whose noise exceeds 1/5 of them 
 
 Usage: ``python benchmarks/lut_audit.py`` (everything; hours on 2 cores, Bruneton's precompute
 dominates). Parts can run separately: ``--part grid|sweeps`` and ``--methods NAME ...`` (the
-sweeps render only their own 12 skies of the grid, minutes with the batch's 1024 spp); each
+sweeps render only their own 12 skies of the grid: hours on 2 cores at the grid's 0.3% target); each
 part's numbers are kept in results/lut_audit/<part>_<method>.json and the report is rebuilt from
 every JSON present, so a long audit can be completed in pieces. Writes results/lut_audit.md,
 results/lut_audit.csv and results/lut_audit/*.png.

@@ -6,7 +6,7 @@ same ground truth by :func:`skyref.audit.audit.compare`.
 **Skies** (:data:`MAP_SKIES`): eight skies of four kinds (clear, hazy, sunset, high altitude)
 taken from the ground truth of the standard LUT audit grid (``grids/lut_audit.toml``: Bruneton
 2017's atmosphere as published and at turbidity 6; 64x32 pixel-centre directions over the whole
-sphere; 17 wavelengths 380–780 nm; 1024 samples per direction).
+sphere; 17 wavelengths 380–780 nm; rendered to 0.3% relative standard error per direction).
 
 **Error** per sky: the noise-corrected RMS of the relative luminance error over the sky (every
 view that misses the ground, solar disk excluded), the 95th percentile of CIEDE2000 (absolute
