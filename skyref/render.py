@@ -131,6 +131,8 @@ def traced_views(scene, pixels: np.ndarray, symmetry: bool = True) -> tuple:
     """Which of the rendered ``pixels`` to trace: (their positions in ``pixels``, and for each
     pixel the position of its estimate among them). With ``symmetry``, one view of each group
     that sees the same sky (:func:`skyref.symmetry.view_groups`); else every pixel."""
+    if not isinstance(symmetry, (bool, np.bool_)):
+        raise ParameterError("symmetry", symmetry, "true or false", "not a boolean")
     if not symmetry:
         everything = np.arange(len(pixels))
         return everything, everything
@@ -230,9 +232,9 @@ def render_sky(scene, spp: int | None = None, passes: int | None = None, seed: i
     if settings.spp < settings.passes:
         raise ParameterError("spp", settings.spp, f">= passes ({settings.passes})", "too few samples")
     scene = scene.replace(render=settings)
-    renderer = _PixelRenderer(scene, variant, geometry, wavelengths_per_path)
     pixels = rendered_pixels(scene)
     traced, estimate_of = traced_views(scene, pixels, symmetry)
+    renderer = _PixelRenderer(scene, variant, geometry, wavelengths_per_path)
     spp_per_pass = settings.spp // settings.passes
 
     bar, advance = None, None
@@ -328,9 +330,9 @@ def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, in
     if spp < passes:
         raise ParameterError("max_spp", max_spp, f">= passes ({passes})", "too few samples")
     scene = scene.replace(render=_settings(scene, spp, None, seeds[0]))
-    renderer = _PixelRenderer(scene, variant, "spherical", 0)
     pixels = rendered_pixels(scene)
     traced, estimate_of = traced_views(scene, pixels, symmetry)
+    renderer = _PixelRenderer(scene, variant, "spherical", 0)
     views = pixels[traced]
     pool = PixelPool(views.size, len(ORDER_NAMES), len(scene.wavelengths_nm), stokes_components(scene))
     elapsed, used_seeds = 0.0, []

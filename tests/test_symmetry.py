@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from skyref.audit.metrics import _statistics, shared_estimates
+from skyref.errors import ParameterError
 from skyref.render import render_sky, render_to_error, rendered_pixels
 from skyref.scene import Camera, RenderSettings, Scene, SceneObject, Sun
 from skyref.symmetry import view_groups
@@ -36,9 +37,8 @@ def test_each_pixel_shares_the_estimate_of_its_mirror_image_across_the_sun_verti
     zenith, azimuth = pixel_angles(64, 32)
     mirror = np.mod(2.0 * sun_azimuth - azimuth, 360.0)
     # the pixel whose estimate each one takes has its zenith and its own or its mirror azimuth
-    taken = groups
-    assert np.array_equal(zenith[taken], zenith)
-    same = np.isclose(azimuth[taken], azimuth) | np.isclose(azimuth[taken], mirror)
+    assert np.array_equal(zenith[groups], zenith)
+    same = np.isclose(azimuth[groups], azimuth) | np.isclose(azimuth[groups], mirror)
     assert same.all()
     expected = 32 * 32 if sun_azimuth == 180.0 else 32 * 33
     assert np.unique(groups).size == expected
@@ -91,6 +91,14 @@ def test_an_adaptive_render_counts_samples_and_targets_per_pixel(mi):
     assert np.array_equal(flat, flat[view_groups(scene, np.arange(48))])
     worst = np.max(sky.standard_error / sky.radiance, axis=-1)
     assert sky.metadata["pixels_at_target"] == pytest.approx(np.mean(worst <= 0.02))
+
+
+def test_the_keyword_refuses_a_bad_value_before_any_work():
+    scene = scene_with(Sun(60.0, 180.0), 8, 4)
+    with pytest.raises(ParameterError, match=r"symmetry = 'no': not a boolean"):
+        render_sky(scene, symmetry="no")
+    with pytest.raises(ParameterError, match=r"symmetry = 1: not a boolean"):
+        render_to_error(scene, 0.01, seeds=[1], max_spp=64, symmetry=1)
 
 
 def test_shared_estimates_are_told_by_equal_values_in_every_channel():
