@@ -46,7 +46,7 @@ ESTIMATORS = ("line_integral", "delta_tracking")
 def timed(scene, spp, polarized, estimator):
     # compile first: one sample per batch launches the timed render's kernels (they do not
     # depend on the launch size, tests/test_integrator_plugin.py)
-    # every pixel traced (symmetry=False): a polarized render traces them all, scalar ones need not
+    # every pixel traced (symmetry=False): this measures the estimators' cost per direction
     render_sky(scene, spp=BATCHES, passes=BATCHES, seed=2, polarized=polarized, estimator=estimator, symmetry=False)
     start = time.process_time()
     sky = render_sky(scene, spp=BATCHES * spp, passes=BATCHES, seed=3, polarized=polarized, estimator=estimator,

@@ -66,8 +66,8 @@ def render_truths(spp: int) -> tuple[dict, dict]:
             cost = path + ".cpu.json"                   # the render's CPU seconds, for later runs' reports
             if not (os.path.exists(path) and os.path.exists(cost)):
                 start = time.process_time()
-                # every pixel traced in both modes (a polarized render uses no symmetry), so that their
-                # costs compare and their pixels' noise is independent
+                # every pixel traced in both modes (symmetry=False), so that their costs are per
+                # direction, as in the polarization benchmark, and their pixels' noise is independent
                 truth = render_sky(scene, spp=spp, passes=PASSES, seed=SEED + index, polarized=mode == "polarized",
                                    estimator="line_integral", symmetry=False)
                 seconds = time.process_time() - start

@@ -29,7 +29,7 @@ from skyref.plugins import load_mitsuba
 from skyref.projection import camera_to_world, pixel_directions
 from skyref.scene import RenderSettings
 from skyref.sky import ORDER_NAMES, STOKES, Sky
-from skyref.symmetry import view_groups
+from skyref.symmetry import copy_estimates, view_groups
 from skyref.validation import check_choice, check_number
 
 __all__ = ["MAX_IMAGE_VALUES", "GEOMETRIES", "sensor_dict", "build_integrator", "stokes_components",
@@ -128,17 +128,18 @@ def rendered_pixels(scene) -> np.ndarray:
 
 
 def traced_views(scene, pixels: np.ndarray, symmetry: bool = True) -> tuple:
-    """Which of the rendered ``pixels`` to trace: (their positions in ``pixels``, and for each
-    pixel the position of its estimate among them). With ``symmetry``, one view of each group
+    """Which of the rendered ``pixels`` to trace: (their positions in ``pixels``; for each pixel
+    the position of its estimate among them; for each pixel whether it sees that view's mirror
+    image, for :func:`skyref.symmetry.copy_estimates`). With ``symmetry``, one view of each group
     that sees the same sky (:func:`skyref.symmetry.view_groups`); else every pixel."""
     if not isinstance(symmetry, (bool, np.bool_)):
         raise ParameterError("symmetry", symmetry, "true or false", "not a boolean")
     if not symmetry:
         everything = np.arange(len(pixels))
-        return everything, everything
-    groups = view_groups(scene, pixels)
+        return everything, everything, np.zeros(len(pixels), dtype=bool)
+    groups, mirrored = view_groups(scene, pixels)
     traced = np.unique(groups)
-    return traced, np.searchsorted(traced, groups)
+    return traced, np.searchsorted(traced, groups), mirrored
 
 
 class _PixelRenderer:
@@ -233,7 +234,7 @@ def render_sky(scene, spp: int | None = None, passes: int | None = None, seed: i
         raise ParameterError("spp", settings.spp, f">= passes ({settings.passes})", "too few samples")
     scene = scene.replace(render=settings)
     pixels = rendered_pixels(scene)
-    traced, estimate_of = traced_views(scene, pixels, symmetry)
+    traced, estimate_of, mirrored = traced_views(scene, pixels, symmetry)
     renderer = _PixelRenderer(scene, variant, geometry, wavelengths_per_path)
     spp_per_pass = settings.spp // settings.passes
 
@@ -254,7 +255,8 @@ def render_sky(scene, spp: int | None = None, passes: int | None = None, seed: i
         bar.close()
 
     orders, standard_error = renderer.statistics(per_pass)
-    orders, standard_error = orders[estimate_of], standard_error[estimate_of]
+    orders = copy_estimates(orders, estimate_of, mirrored, settings.polarized)
+    standard_error = standard_error[estimate_of]
     spp_total = spp_per_pass * settings.passes
     metadata = renderer.metadata(spp_total, settings.passes, settings.seed, elapsed, traced.size * spp_total,
                                  traced.size)
@@ -331,7 +333,7 @@ def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, in
         raise ParameterError("max_spp", max_spp, f">= passes ({passes})", "too few samples")
     scene = scene.replace(render=_settings(scene, spp, None, seeds[0]))
     pixels = rendered_pixels(scene)
-    traced, estimate_of = traced_views(scene, pixels, symmetry)
+    traced, estimate_of, mirrored = traced_views(scene, pixels, symmetry)
     renderer = _PixelRenderer(scene, variant, "spherical", 0)
     views = pixels[traced]
     pool = PixelPool(views.size, len(ORDER_NAMES), len(scene.wavelengths_nm), stokes_components(scene))
@@ -370,7 +372,7 @@ def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, in
     metadata.update(target_relative_error=target_relative_error,
                     spp_range=[int(samples.min()), int(samples.max())] if pixels.size else [0, 0],
                     pixels_at_target=float(np.mean(error <= target_relative_error)) if pixels.size else 1.0)
-    sky = _sky(scene, pixels, pool.radiance[estimate_of], pool.standard_error[estimate_of], pool.orders[estimate_of],
-               metadata)
+    orders = copy_estimates(pool.orders, estimate_of, mirrored, scene.render.polarized)
+    sky = _sky(scene, pixels, orders.sum(axis=1), pool.standard_error[estimate_of], orders, metadata)
     sky.metadata["relative_error_p95"] = relative_error_percentile(sky)
     return sky

@@ -11,10 +11,19 @@ Hosek training grid), and with the sun at the zenith every pixel of a row sees t
 A render traces one direction of each such group and copies its estimate to the others
 (:func:`view_groups`): about half the cost, one row's worth with the sun at the zenith.
 
-Not used where the symmetry does not hold or a copy would not be the same estimand: a scene
-with objects (they stand anywhere), pixels sampled over their area (a footprint's mirror image
-need not be a footprint), and polarized renders (the reflection turns U and V over; skyref
-traces every view there).
+Polarized light is mirrored too. Each view's Stokes vector is referred to its meridian frame
+(:mod:`skyref.plugins.polarization`): e_perp = normalize(d x up), e_par = -d x e_perp. The
+reflection maps the frame of d to that of its mirror image d' with e_par kept and e_perp turned
+over (a reflection reverses cross products), so the mirror image of the light seen along d,
+referred to the frame of d', has the same I and Q and the opposite U and V (the handedness of
+circular polarization turns over with the mirror). The phase matrices of Rayleigh scattering,
+of spheres and of a Lambertian ground are unchanged by that sign change (their U-V block and
+I-Q block do not mix), so the sky's Stokes vector along d' is diag(1, 1, -1, -1) times that
+along d (:data:`MIRROR_STOKES_SIGNS`). A rotation about the vertical keeps every frame's
+orientation: copies along a row under a zenith sun keep all four components.
+
+Not used where the symmetry does not hold: a scene with objects (they stand anywhere) and pixels
+sampled over their area (a footprint's mirror image need not be a footprint).
 
 A copy is the same estimate, not a second one: its noise is the same draw. Statistics over
 many pixels that need their noise (the mean of a region, the noise-corrected RMS of an error)
@@ -27,36 +36,58 @@ import numpy as np
 
 from skyref.projection import pixel_directions
 
-__all__ = ["view_groups", "KEY_DECIMALS"]
+__all__ = ["view_groups", "copy_estimates", "KEY_DECIMALS", "MIRROR_STOKES_SIGNS"]
 
 #: Directions are compared to 1e-9 (unit-vector components): two pixel centres closer than that
 #: see the same sky to float32 precision, the precision the integrator traces them in.
 KEY_DECIMALS = 9
 
+#: What the reflection through the sun's vertical plane does to a Stokes vector (I, Q, U, V),
+#: each referred to its own view's meridian frame (module docstring).
+MIRROR_STOKES_SIGNS = np.array([1.0, 1.0, -1.0, -1.0])
 
-def view_groups(scene, pixels: np.ndarray) -> np.ndarray:
-    """For each of the scene's ``pixels`` (flat indices, row * width + column), the position in
-    ``pixels`` of the one whose estimate it takes: the first pixel of its symmetry group (see the
-    module docstring), itself where no other pixel sees the same sky or the symmetry does not
-    apply. ``np.unique`` of the result are the pixels to trace."""
+
+def view_groups(scene, pixels: np.ndarray) -> tuple:
+    """Which estimate each of the scene's ``pixels`` (flat indices, row * width + column) takes:
+    (groups, mirrored). ``groups``: for each pixel, the position in ``pixels`` of the first pixel
+    of its symmetry group (see the module docstring), itself where no other pixel sees the same
+    sky or the symmetry does not apply; ``np.unique(groups)`` are the pixels to trace.
+    ``mirrored``: per pixel, whether it sees the mirror image of that first pixel's sky (its U
+    and V turned over) rather than the same sky (itself, or a rotation about the vertical)."""
     positions = np.arange(len(pixels))
+    unshared = (positions, np.zeros(len(pixels), dtype=bool))
     render = scene.render
-    if scene.objects or render.pixel_sampling != "centre" or render.polarized or len(pixels) == 0:
-        return positions
+    if scene.objects or render.pixel_sampling != "centre" or len(pixels) == 0:
+        return unshared
     directions = pixel_directions(scene.camera).reshape(-1, 3)[pixels]
     up_component = directions[:, 2]
     if scene.sun.zenith_deg == 0.0:
         # every rotation about the vertical leaves the sky as it is: the view zenith tells all
-        keys = up_component[:, None]
+        keys, side = up_component[:, None], np.zeros(len(pixels))
     else:
         sun = np.asarray(scene.sun.direction, dtype=np.float64).reshape(3)
         towards_sun = np.array([sun[0], sun[1], 0.0]) / np.hypot(sun[0], sun[1])   # horizontal
         across = np.array([-towards_sun[1], towards_sun[0], 0.0])                   # normal of the sun's vertical plane
         # the reflection turns the component across the plane over and leaves the other two
-        keys = np.stack([up_component, directions @ towards_sun, np.abs(directions @ across)], axis=1)
+        across_component = np.round(directions @ across, KEY_DECIMALS)
+        keys = np.stack([up_component, directions @ towards_sun, np.abs(across_component)], axis=1)
+        side = np.sign(across_component)                       # 0 in the plane: its own mirror image
     keys = np.round(keys, KEY_DECIMALS)
     finite = np.all(np.isfinite(keys), axis=1)
     groups = positions.copy()
     _, first, inverse = np.unique(keys[finite], axis=0, return_index=True, return_inverse=True)
     groups[finite] = positions[finite][first][inverse.reshape(-1)]
-    return groups
+    return groups, side * side[groups] < 0.0
+
+
+def copy_estimates(per_view: np.ndarray, estimate_of: np.ndarray, mirrored: np.ndarray,
+                   polarized: bool) -> np.ndarray:
+    """Per pixel, the estimate of the view it takes (``per_view[estimate_of]``, pixels first);
+    if ``polarized`` (an axis of the 4 Stokes components before the last, wavelength axis), with
+    U and V turned over where the pixel is ``mirrored`` (:data:`MIRROR_STOKES_SIGNS`). Means
+    only: a standard error is the same for a view and its mirror image."""
+    copies = per_view[estimate_of]
+    if not polarized or not mirrored.any():
+        return copies
+    signs = np.where(mirrored[:, None], MIRROR_STOKES_SIGNS, 1.0)
+    return copies * signs.reshape(len(signs), *(1,) * (copies.ndim - 3), len(MIRROR_STOKES_SIGNS), 1)

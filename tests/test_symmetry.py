@@ -1,6 +1,7 @@
 """Views that see the same sky (skyref.symmetry): which pixels pair up, that a render tracing one of
-each pair agrees with one tracing every pixel, and that statistics over pixels add the noise of
-a shared estimate coherently (skyref.audit.metrics)."""
+each pair agrees with one tracing every pixel (Stokes vectors too: U and V turned over in a mirror
+image), and that statistics over pixels add the noise of a shared estimate coherently
+(skyref.audit.metrics)."""
 
 import numpy as np
 import pytest
@@ -33,32 +34,38 @@ def test_each_pixel_shares_the_estimate_of_its_mirror_image_across_the_sun_verti
     one opposite are their own mirror images: 33 views per row instead of 64."""
     scene = scene_with(Sun(60.0, sun_azimuth))
     pixels = rendered_pixels(scene)
-    groups = view_groups(scene, pixels)
+    groups, mirrored = view_groups(scene, pixels)
     zenith, azimuth = pixel_angles(64, 32)
     mirror = np.mod(2.0 * sun_azimuth - azimuth, 360.0)
-    # the pixel whose estimate each one takes has its zenith and its own or its mirror azimuth
+    # the pixel whose estimate each one takes has its zenith and its own or its mirror azimuth,
+    # and is said to be mirrored exactly where it is the mirror azimuth (the sun's column and the
+    # one opposite are their own mirror images, which is no mirroring)
     assert np.array_equal(zenith[groups], zenith)
-    same = np.isclose(azimuth[groups], azimuth) | np.isclose(azimuth[groups], mirror)
-    assert same.all()
+    own = np.isclose(azimuth[groups], azimuth)
+    assert (own | np.isclose(azimuth[groups], mirror)).all()
+    assert np.array_equal(mirrored, ~own)
     expected = 32 * 32 if sun_azimuth == 180.0 else 32 * 33
     assert np.unique(groups).size == expected
+    assert mirrored.sum() == pixels.size - expected
 
 
 def test_with_the_sun_at_the_zenith_a_row_is_one_view():
+    """A rotation about the vertical: every copy keeps its Stokes vector (none is mirrored)."""
     scene = scene_with(Sun(0.0, 180.0))
-    groups = view_groups(scene, rendered_pixels(scene))
+    groups, mirrored = view_groups(scene, rendered_pixels(scene))
     assert np.array_equal(groups, np.repeat(np.arange(32) * 64, 64))
+    assert not mirrored.any()
 
 
-@pytest.mark.parametrize("case", ["sun off the columns' symmetry", "area sampling", "polarized", "object"])
-def test_no_view_is_shared_where_the_symmetry_does_not_hold_or_the_copy_would_differ(case):
+@pytest.mark.parametrize("case", ["sun off the columns' symmetry", "area sampling", "object"])
+def test_no_view_is_shared_where_the_symmetry_does_not_hold(case):
     scene = {"sun off the columns' symmetry": scene_with(Sun(60.0, 10.0)),
              "area sampling": scene_with(Sun(60.0, 180.0), pixel_sampling="area"),
-             "polarized": scene_with(Sun(60.0, 180.0), polarized=True),
              "object": scene_with(Sun(60.0, 180.0)).replace(objects=(SceneObject("sphere", scale_m=(10.0, 10.0, 10.0),
                                                                                     translate_m=(50.0, 0.0, 20.0)),))}[case]
     pixels = rendered_pixels(scene)
-    assert np.array_equal(view_groups(scene, pixels), np.arange(pixels.size))
+    groups, mirrored = view_groups(scene, pixels)
+    assert np.array_equal(groups, np.arange(pixels.size)) and not mirrored.any()
 
 
 @pytest.mark.parametrize("sun", [Sun(60.0, 180.0), Sun(0.0, 180.0)], ids=["mirror", "zenith sun"])
@@ -73,11 +80,36 @@ def test_a_symmetric_render_agrees_with_one_that_traces_every_pixel(mi, sun):
     assert symmetric.metadata["views_traced"] == (64 if sun.zenith_deg else 8)
     assert everything.metadata["views_traced"] == 128
     flat = symmetric.radiance.reshape(128, -1)
-    groups = view_groups(scene, np.arange(128))
+    groups, _ = view_groups(scene, np.arange(128))
     assert np.array_equal(flat, flat[groups])
     z = (symmetric.radiance - everything.radiance) / np.hypot(symmetric.standard_error, everything.standard_error)
     assert np.all(np.isfinite(z)) and np.max(np.abs(z)) < 4.5, np.max(np.abs(z))
     assert 0.6 < np.mean(z ** 2) < 1.5, np.mean(z ** 2)
+
+
+def test_a_symmetric_polarized_render_turns_u_and_v_over_in_a_mirror_image(mi):
+    """The default atmosphere (Rayleigh, a non-polarizing aerosol, a Lambertian ground: V = 0),
+    sun at zenith 60, 16x8 pixels: off the sun's vertical plane U is
+    tens of percent of I with opposite signs on its two sides. A copy of a mirror image has its
+    view's I and Q and -U bit for bit, and every component agrees with an independent render of
+    every pixel within the standard errors: a copy that kept U would be off by 2|U|, many
+    standard errors."""
+    scene = scene_with(Sun(60.0, 180.0), 16, 8, estimator="delta_tracking", polarized=True)
+    symmetric = render_sky(scene, spp=4096, passes=16, seed=7)
+    everything = render_sky(scene, spp=4096, passes=16, seed=8, symmetry=False)
+    assert symmetric.metadata["views_traced"] == 64
+    groups, mirrored = view_groups(scene, np.arange(128))
+    stokes = symmetric.stokes.reshape(128, 4, -1)
+    assert np.array_equal(stokes[:, :2], stokes[groups, :2])
+    assert np.array_equal(stokes[mirrored, 2:], -stokes[groups[mirrored], 2:])
+    sky = everything.directions[..., 2] > 0.0                  # below: the ground, unpolarized (Q = U = 0 exactly)
+    u = everything.stokes[sky][:, 2]
+    assert np.max(np.abs(u) / everything.radiance[sky]) > 0.1  # U is there to be mirrored
+    for component in range(3):                                  # I, Q, U (V is 0 in both)
+        z = ((symmetric.stokes[sky][:, component] - everything.stokes[sky][:, component])
+             / np.hypot(symmetric.stokes_error[sky][:, component], everything.stokes_error[sky][:, component]))
+        assert np.all(np.isfinite(z)) and np.max(np.abs(z)) < 4.5, (component, np.max(np.abs(z)))
+        assert 0.6 < np.mean(z ** 2) < 1.5, (component, np.mean(z ** 2))
 
 
 def test_an_adaptive_render_counts_samples_and_targets_per_pixel(mi):
@@ -88,9 +120,21 @@ def test_an_adaptive_render_counts_samples_and_targets_per_pixel(mi):
     sky = render_to_error(scene, 0.02, seeds=[11, 12, 13], max_spp=4096)
     assert sky.metadata["views_traced"] == 24
     flat = sky.radiance.reshape(48, -1)
-    assert np.array_equal(flat, flat[view_groups(scene, np.arange(48))])
+    assert np.array_equal(flat, flat[view_groups(scene, np.arange(48))[0]])
     worst = np.max(sky.standard_error / sky.radiance, axis=-1)
     assert sky.metadata["pixels_at_target"] == pytest.approx(np.mean(worst <= 0.02))
+
+
+def test_an_adaptive_polarized_render_turns_u_and_v_over_in_a_mirror_image(mi):
+    scene = scene_with(Sun(40.0, 180.0), 8, 6, passes=16, estimator="delta_tracking", polarized=True)
+    sky = render_to_error(scene, 0.05, seeds=[11, 12], max_spp=1024)
+    assert sky.metadata["views_traced"] == 24
+    groups, mirrored = view_groups(scene, np.arange(48))
+    stokes, error = sky.stokes.reshape(48, 4, -1), sky.stokes_error.reshape(48, 4, -1)
+    assert mirrored.sum() == 24
+    assert np.array_equal(stokes[:, :2], stokes[groups, :2]) and np.array_equal(error, error[groups])
+    assert np.array_equal(stokes[mirrored, 2:], -stokes[groups[mirrored], 2:])
+    assert np.abs(stokes[mirrored, 2]).max() > 0.0
 
 
 def test_the_keyword_refuses_a_bad_value_before_any_work():
