@@ -16,7 +16,10 @@ the sky. Adaptive rounds aim at I's error.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+import json
 import math
+import os
 import time
 
 import numpy as np
@@ -25,6 +28,8 @@ from tqdm import tqdm
 
 from skyref import __version__
 from skyref.errors import ParameterError
+from skyref.io.atomic import atomic_path
+from skyref.io.json_numpy import numpy_default
 from skyref.plugins import load_mitsuba
 from skyref.projection import camera_to_world, pixel_directions
 from skyref.scene import RenderSettings
@@ -35,7 +40,7 @@ from skyref.validation import check_choice, check_number
 __all__ = ["MAX_IMAGE_VALUES", "GEOMETRIES", "sensor_dict", "build_integrator", "stokes_components",
            "check_image_size", "render_sky",
            "rendered_pixels", "relative_error_percentile", "pixel_relative_error", "PixelPool",
-           "render_to_error", "ROUND_MARGIN", "traced_views"]
+           "AdaptiveProgress", "render_to_error", "ROUND_MARGIN", "traced_views"]
 
 #: Most values (passes x pixels x scattering orders x Stokes components (polarized: 4) x
 #: wavelengths) one render accumulates: each takes ~12 bytes across the device buffer and its host
@@ -312,8 +317,66 @@ class PixelPool:
         self.samples[pixels] = total
 
 
+class AdaptiveProgress:
+    """Where an adaptive render (:func:`render_to_error`) stands: its pooled estimates, the
+    rounds done and the seeds they used, the current round's launches (samples per pass, the
+    views, the seed) and how many of them are done, and the render time so far.
+
+    Kept in a checkpoint file (``.npz``, written atomically after every launch) it lets a render
+    that was killed part-way resume at its next launch when called again with the same arguments:
+    hours of a hard sky are not lost with the process. Resuming continues the round as it was
+    planned: planned again from the part-pooled estimates, a view could be traced twice with one
+    seed and count, the same samples counted twice."""
+
+    #: Bump when the file's layout or the meaning of its values changes: older files are not used.
+    FORMAT = 1
+
+    def __init__(self, pool: PixelPool, key: str):
+        """``key``: what the render is (:func:`_adaptive_key`); a file with another key is not
+        used."""
+        self.pool, self.key = pool, key
+        self.round, self.launches, self.done, self.elapsed, self.used_seeds = 0, None, 0, 0.0, []
+
+    def save(self, path) -> None:
+        pool = self.pool
+        launches = self.launches or []
+        with atomic_path(path) as tmp, open(tmp, "wb") as f:
+            np.savez(f, key=np.array(self.key), round=self.round, done=self.done, elapsed=self.elapsed,
+                     used_seeds=np.asarray(self.used_seeds, dtype=np.int64), planned=self.launches is not None,
+                     launch_spp=np.asarray([c for c, _, _ in launches], dtype=np.int64),
+                     launch_seeds=np.asarray([s for _, _, s in launches], dtype=np.int64),
+                     launch_sizes=np.asarray([m.size for _, m, _ in launches], dtype=np.int64),
+                     launch_views=np.concatenate([m for _, m, _ in launches] or [np.zeros(0, dtype=np.int64)]),
+                     samples=pool.samples, orders=pool.orders, variance=pool.variance)
+
+    def resume(self, path) -> bool:
+        """Take up the state kept in ``path`` if it holds this render's; whether it did."""
+        if not os.path.exists(path):
+            return False
+        with np.load(path) as kept:
+            if str(kept["key"]) != self.key or kept["orders"].shape != self.pool.orders.shape:
+                return False
+            self.pool.samples[:], self.pool.orders[:], self.pool.variance[:] = \
+                kept["samples"], kept["orders"], kept["variance"]
+            self.round, self.done, self.elapsed = int(kept["round"]), int(kept["done"]), float(kept["elapsed"])
+            self.used_seeds = [int(seed) for seed in kept["used_seeds"]]
+            views = np.split(kept["launch_views"], np.cumsum(kept["launch_sizes"])[:-1])
+            self.launches = ([(int(c), v, int(s)) for c, v, s in zip(kept["launch_spp"], views, kept["launch_seeds"])]
+                             if bool(kept["planned"]) else None)
+        return True
+
+
+def _adaptive_key(scene, target_relative_error, seeds, max_spp, initial_spp, views) -> str:
+    """What an adaptive render is, as a digest: the scene (its render settings too), the target,
+    seeds and sample counts, the views traced, and :attr:`AdaptiveProgress.FORMAT`."""
+    what = {"format": AdaptiveProgress.FORMAT, "scene": scene.to_dict(), "target": target_relative_error,
+            "seeds": [int(seed) for seed in seeds], "max_spp": int(max_spp), "initial_spp": int(initial_spp),
+            "views": hashlib.sha256(np.asarray(views, dtype=np.int64).tobytes()).hexdigest()}
+    return hashlib.sha256(json.dumps(what, sort_keys=True, default=numpy_default).encode()).hexdigest()
+
+
 def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, initial_spp: int | None = None,
-                    variant: str | None = None, symmetry: bool = True) -> Sky:
+                    variant: str | None = None, symmetry: bool = True, checkpoint=None) -> Sky:
     """Render ``scene`` until every rendered pixel's :func:`pixel_relative_error` is at most
     ``target_relative_error``, or it has had ``max_spp`` samples: adaptive per direction, so a
     dark pixel costs its own samples, not the sky's.
@@ -325,7 +388,10 @@ def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, in
     the Hosek training skies, pixels ending at 0.83% for a 1% target in the median), within
     ``max_spp``. The sky's metadata records the mean, smallest and largest samples per pixel,
     the share of pixels at the target and the 95th percentile of the relative error. A polarized scene (``render.polarized``)
-    pools every Stokes component and aims at I's error. ``symmetry``: as in :func:`render_sky`."""
+    pools every Stokes component and aims at I's error. ``symmetry``: as in :func:`render_sky`.
+    ``checkpoint``: a file (``.npz``) where the render keeps its state after every launch
+    (:class:`AdaptiveProgress`), and from which a call with the same arguments resumes; it is
+    left in place (a later call returns the finished sky at once), for the caller to remove."""
     check_number("target_relative_error", target_relative_error, 1e-5, 1.0)
     passes = scene.render.passes
     spp = min(initial_spp or max(16 * passes, 64), max_spp)
@@ -337,38 +403,46 @@ def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, in
     renderer = _PixelRenderer(scene, variant, "spherical", 0)
     views = pixels[traced]
     pool = PixelPool(views.size, len(ORDER_NAMES), len(scene.wavelengths_nm), stokes_components(scene))
-    elapsed, used_seeds = 0.0, []
+    progress = AdaptiveProgress(pool, _adaptive_key(scene, target_relative_error, seeds, max_spp, spp, views))
+    if checkpoint is not None:
+        progress.resume(checkpoint)
 
-    def trace(members, spp_per_pass, seed):
-        nonlocal elapsed
-        start = time.perf_counter()
-        per_pass = renderer.passes(views[members], spp_per_pass, passes, seed)
-        elapsed += time.perf_counter() - start
-        pool.add(members, spp_per_pass * passes, *renderer.statistics(per_pass))
-
-    for round_index, seed in enumerate(seeds):
+    def plan(round_index, seed) -> list:
+        """The launches of a round: (samples per pass, positions in ``views``, seed) each."""
         if round_index == 0:
-            trace(np.arange(views.size), spp // passes, seed)
-        else:
-            error = pixel_relative_error(pool.radiance[:, 0], pool.standard_error[:, 0])
-            with np.errstate(invalid="ignore", over="ignore"):
-                wanted = np.ceil(ROUND_MARGIN * pool.samples * (error / target_relative_error) ** 2) - pool.samples
-            room = (max_spp - pool.samples) // passes                  # samples per pass left
-            counts = 2 ** np.round(np.log2(np.maximum(np.nan_to_num(wanted, posinf=max_spp) / passes, 1.0)))
-            counts = np.minimum(counts, 2 ** np.floor(np.log2(np.maximum(room, 1))))
-            active = (error > target_relative_error) & (room >= 1)
-            if not active.any():
+            return [(spp // passes, np.arange(views.size), seed)]
+        error = pixel_relative_error(pool.radiance[:, 0], pool.standard_error[:, 0])
+        with np.errstate(invalid="ignore", over="ignore"):
+            wanted = np.ceil(ROUND_MARGIN * pool.samples * (error / target_relative_error) ** 2) - pool.samples
+        room = (max_spp - pool.samples) // passes                  # samples per pass left
+        counts = 2 ** np.round(np.log2(np.maximum(np.nan_to_num(wanted, posinf=max_spp) / passes, 1.0)))
+        counts = np.minimum(counts, 2 ** np.floor(np.log2(np.maximum(room, 1))))
+        active = (error > target_relative_error) & (room >= 1)
+        return [(int(count), np.flatnonzero(active & (counts == count)),
+                 (seed + 0x9E3779B1 * int(count).bit_length()) % (1 << 31))
+                for count in np.unique(counts[active]).astype(int)]
+
+    while progress.round < len(seeds):
+        if progress.launches is None:
+            progress.launches, progress.done = plan(progress.round, seeds[progress.round]), 0
+            if not progress.launches:
                 break
-            for count in np.unique(counts[active]).astype(int):
-                members = np.flatnonzero(active & (counts == count))
-                trace(members, int(count), (seed + 0x9E3779B1 * int(count).bit_length()) % (1 << 31))
-        used_seeds.append(seed)
+        for spp_per_pass, members, seed in progress.launches[progress.done:]:
+            start = time.perf_counter()
+            per_pass = renderer.passes(views[members], spp_per_pass, passes, seed)
+            progress.elapsed += time.perf_counter() - start
+            pool.add(members, spp_per_pass * passes, *renderer.statistics(per_pass))
+            progress.done += 1
+            if checkpoint is not None:
+                progress.save(checkpoint)
+        progress.used_seeds.append(seeds[progress.round])
+        progress.round, progress.launches = progress.round + 1, None
 
     # per pixel from here on: a pixel that shares its view's estimate has its samples and error
     error = pixel_relative_error(pool.radiance[:, 0], pool.standard_error[:, 0])[estimate_of]
     samples = pool.samples[estimate_of]
-    metadata = renderer.metadata(round(samples.sum() / max(pixels.size, 1)), passes, used_seeds, elapsed,
-                                 int(pool.samples.sum()), views.size)
+    metadata = renderer.metadata(round(samples.sum() / max(pixels.size, 1)), passes, progress.used_seeds,
+                                 progress.elapsed, int(pool.samples.sum()), views.size)
     metadata.update(target_relative_error=target_relative_error,
                     spp_range=[int(samples.min()), int(samples.max())] if pixels.size else [0, 0],
                     pixels_at_target=float(np.mean(error <= target_relative_error)) if pixels.size else 1.0)

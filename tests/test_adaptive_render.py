@@ -81,3 +81,50 @@ def test_the_sky_region_traces_only_directions_at_or_above_the_horizon(mi):
 def test_render_region_is_checked():
     with pytest.raises(ParameterError, match="render.region"):
         RenderSettings(region="upper")
+
+
+def test_a_killed_adaptive_render_resumes_at_its_next_launch_to_the_same_sky(mi, tmp_path, monkeypatch):
+    """A render killed after its third launch (of round 2) and called again with the same checkpoint
+    traces only the launches it had not done, and returns the sky an uninterrupted render does,
+    bit for bit (the same launches with the same seeds: a round planned again from part-pooled
+    estimates would trace other launches); a finished checkpoint traces nothing; a checkpoint
+    of another render (another target) is not used."""
+    import skyref.render as render
+
+    scene = Scene(sun=Sun(zenith_deg=40.0), camera=Camera(width=8, height=6), wavelengths="rgb",
+                  render=RenderSettings(passes=16, pixel_sampling="centre", estimator="delta_tracking"))
+    arguments = dict(seeds=[11, 12, 13, 14], max_spp=16384)
+    launches = []
+    real_passes = render._PixelRenderer.passes
+
+    def counted(self, pixels, *args, **kwargs):
+        if len(launches) == kill_after:
+            raise KeyboardInterrupt("killed")
+        launches.append(len(pixels))
+        return real_passes(self, pixels, *args, **kwargs)
+
+    monkeypatch.setattr(render._PixelRenderer, "passes", counted)
+    kill_after = None
+    whole = render_to_error(scene, 0.01, **arguments)
+    every_launch = list(launches)
+    assert len(every_launch) >= 5                            # rounds with several counts each
+
+    path = tmp_path / "partial" / "sky.npz"
+    launches.clear()
+    kill_after = 3
+    with pytest.raises(KeyboardInterrupt):
+        render_to_error(scene, 0.01, checkpoint=path, **arguments)
+    assert path.exists()
+    launches.clear()
+    kill_after = None
+    resumed = render_to_error(scene, 0.01, checkpoint=path, **arguments)
+    assert launches == every_launch[3:]
+    for name in ("radiance", "standard_error"):
+        assert np.array_equal(getattr(resumed, name), getattr(whole, name), equal_nan=True), name
+    assert resumed.metadata["seed"] == whole.metadata["seed"] and resumed.metadata["spp"] == whole.metadata["spp"]
+
+    launches.clear()
+    again = render_to_error(scene, 0.01, checkpoint=path, **arguments)
+    assert launches == [] and np.array_equal(again.radiance, whole.radiance, equal_nan=True)
+    other = render_to_error(scene, 0.02, checkpoint=path, **arguments)     # its own render, from the start
+    assert launches[0] == whole.metadata["views_traced"] and other.metadata["target_relative_error"] == 0.02

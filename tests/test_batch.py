@@ -334,3 +334,39 @@ def test_pieces_rendered_apart_import_into_the_same_directory_a_whole_run_makes(
     assert import_skies(fresh, str(tmp_path / "there"), log=lambda *_: None) == \
         {"imported": ["sky-1"], "kept": [], "corrupt": ["sky-2"]}
     assert not (tmp_path / "fresh" / "skies" / "sky-2.exr").exists()
+
+
+def test_an_adaptive_sky_killed_mid_render_resumes_from_its_checkpoint(write_grid, tmp_path):
+    """An adaptive sky (target_relative_error) keeps its state in partial/<id>.npz after every
+    launch: a batch killed with SIGKILL mid-render resumes the sky from there, and its EXR is the
+    uninterrupted run's byte for byte; the checkpoint is gone once the sky is marked."""
+    axes = '"sun.zenith_deg" = [40.0]'
+    output = 'width = 8\nheight = 4\ntarget_relative_error = 0.01\nmax_spp = 32768\npasses = 16'
+    killed = write_grid(tmp_path / "killed.toml", axes, 'directory = "killed"\n' + output)
+    clean = write_grid(tmp_path / "clean.toml", axes, 'directory = "clean"\n' + output)
+    killed_dir, clean_dir = str(tmp_path / "killed"), str(tmp_path / "clean")
+    checkpoint = os.path.join(killed_dir, "partial", "sky-0.npz")
+
+    process = subprocess.Popen(_batch_command(killed), start_new_session=True,
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 300
+    while not os.path.exists(checkpoint) and time.monotonic() < deadline and process.poll() is None:
+        time.sleep(0.02)
+    os.killpg(process.pid, signal.SIGKILL)
+    process.wait()
+    assert os.path.exists(checkpoint) and _markers(killed_dir) == [], "the kill must land mid-render"
+    with np.load(checkpoint) as kept:
+        assert int(kept["samples"].min()) > 0                  # the first round was kept
+        state = dict(kept)
+    # a render time the rerun can only have from the checkpoint (it changes no data): that it was resumed
+    state["elapsed"] = np.float64(1e6)
+    with open(checkpoint, "wb") as f:
+        np.savez(f, **state)
+
+    assert subprocess.run(_batch_command(killed), capture_output=True).returncode == 0
+    assert subprocess.run(_batch_command(clean), capture_output=True).returncode == 0
+    assert not os.path.exists(checkpoint) and _markers(killed_dir) == ["sky-0.json"]
+    exr_a, exr_b = (os.path.join(d, "skies", "sky-0.exr") for d in (killed_dir, clean_dir))
+    assert open(exr_a, "rb").read() == open(exr_b, "rb").read()
+    marker = json.load(open(os.path.join(killed_dir, "markers", "sky-0.json")))
+    assert marker["render_time_s"] > 1e6 and len(marker["seed"]) >= 2     # resumed; more than one round

@@ -8,6 +8,9 @@
                                      SHA-256 and size, the sky's parameters, samples and timings
                                      (the only place timings are kept: EXRs and the dataset hold
                                      data alone, so a rerun writes the same bytes)
+    <directory>/partial/<id>.npz     an adaptive render's checkpoint while the sky is rendered
+                                     (skyref.render.AdaptiveProgress), removed once it is marked:
+                                     a killed run's next run resumes the sky at its next launch
     <directory>/dataset.zarr         every sky in one CF xarray dataset (skyref.batch.dataset)
     <directory>/dataset.nc           its netCDF-3 copy, written once every sky is finished
                                      (on request: ``skyref batch --netcdf``)
@@ -91,6 +94,10 @@ class BatchStore:
 
     def marker_path(self, sky_id: str) -> str:
         return marker_of_exr(self.exr_path(sky_id))
+
+    def checkpoint_path(self, sky_id: str) -> str:
+        """Where an adaptive render of the sky keeps its state until the sky is marked."""
+        return os.path.join(self.directory, "partial", f"{sky_id}.npz")
 
     # --- opening ----------------------------------------------------------------------------
 

@@ -4,6 +4,7 @@ holds sky data, and the worker holds one sky at a time."""
 
 from __future__ import annotations
 
+import contextlib
 import datetime
 import os
 import resource
@@ -30,15 +31,18 @@ def render_and_store(task: dict) -> dict:
     grid, spec = task["grid"], task["sky"]
     output = grid.output
     scene = Scene.from_dict(spec.scene).replace(name=spec.sky_id)
+    store = BatchStore(grid)
+    checkpoint = None
     if output.spp is not None:
         sky = render_sky(scene, spp=output.spp, seed=spec.seed, variant=task["variant"])
         sky.metadata["relative_error_p95"] = relative_error_percentile(sky)
     else:
         seeds = [grid.seed(spec.index, r) for r in range(task["max_rounds"])]
-        sky = render_to_error(scene, output.target_relative_error, seeds, output.max_spp, variant=task["variant"])
+        checkpoint = store.checkpoint_path(spec.sky_id)
+        sky = render_to_error(scene, output.target_relative_error, seeds, output.max_spp, variant=task["variant"],
+                              checkpoint=checkpoint)
     sky.metadata["batch"] = {"sky_id": spec.sky_id, "index": spec.index, "coordinates": spec.coordinates}
 
-    store = BatchStore(grid)
     exr_path = store.exr_path(spec.sky_id)
     write_sky_exr(sky, exr_path)
     store.write_sky(spec.index, sky)
@@ -52,4 +56,7 @@ def render_and_store(task: dict) -> dict:
               "worker_peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
               "finished_at": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
     store.write_marker(spec.sky_id, marker)
+    if checkpoint is not None:
+        with contextlib.suppress(FileNotFoundError):    # none if nothing was traced
+            os.remove(checkpoint)
     return marker
