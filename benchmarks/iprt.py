@@ -25,13 +25,12 @@ import time
 
 import numpy as np
 
+sys.path.insert(0, os.path.dirname(__file__))
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
-from skyref.io.atomic import atomic_write  # noqa: E402
-from skyref.io.json_numpy import numpy_default  # noqa: E402
-from tests.references import iprt  # noqa: E402
+from results_files import write_results  # noqa: E402
 
-RESULTS = os.path.join(os.path.dirname(__file__), "..", "results")
+from tests.references import iprt  # noqa: E402
 
 
 def compare(setting, rows, target):
@@ -114,11 +113,7 @@ def main():
             report["cases"][setting.name] = compare(setting, rows, args.target)
             print(setting.name, json.dumps(report["cases"][setting.name]), flush=True)
     report["scalar_vs_polarized_a1"] = scalar_error_a1(args.target)
-    os.makedirs(RESULTS, exist_ok=True)
-    with atomic_write(os.path.join(RESULTS, "iprt.json")) as f:
-        json.dump(report, f, indent=1, default=numpy_default)
-    with atomic_write(os.path.join(RESULTS, "iprt.md")) as f:
-        f.write(markdown(report))
+    write_results("iprt", report, markdown(report))
 
 
 if __name__ == "__main__":

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import json
 import math
 import os
 import platform
@@ -31,11 +30,11 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
 from groundtruth_speed import BATCHES, SKIES, relative_rms, scene_for, sky_mask  # noqa: E402
 
-from skyref.io.atomic import atomic_path, atomic_write  # noqa: E402
-from skyref.io.json_numpy import numpy_default  # noqa: E402
+from results_files import RESULTS, write_results  # noqa: E402
+
+from skyref.io.atomic import atomic_path  # noqa: E402
 from skyref.render import render_sky  # noqa: E402
 
-RESULTS = os.path.join(os.path.dirname(__file__), "..", "results")
 ZENITH_BANDS = ((0.0, 30.0), (30.0, 60.0), (60.0, 80.0), (80.0, 88.0))
 SUN_BANDS = ((3.0, 30.0), (30.0, 70.0), (70.0, 110.0), (110.0, 180.0))
 
@@ -146,10 +145,7 @@ def main():
     figure(report, os.path.join(RESULTS, "polarization.png"))
     for r in report["skies"].values():
         del r["map"]
-    with atomic_write(os.path.join(RESULTS, "polarization.json")) as f:
-        json.dump(report, f, indent=1, default=numpy_default)
-    with atomic_write(os.path.join(RESULTS, "polarization.md")) as f:
-        f.write(markdown(report))
+    write_results("polarization", report, markdown(report))
     print(markdown(report))
 
 

@@ -31,7 +31,10 @@ import time
 
 import numpy as np
 
+sys.path.insert(0, os.path.dirname(__file__))
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
+
+from results_files import write_results  # noqa: E402
 
 from skyref.audit.metrics import error_maps, region_statistics  # noqa: E402
 from skyref.audit.regions import region_masks  # noqa: E402
@@ -40,12 +43,10 @@ from skyref.audit.speed_map import (ENTRIES, KINDS, TRUTH_GRID, entry_summary, e
 from skyref.batch.grid import load_grid  # noqa: E402
 from skyref.io.atomic import atomic_write  # noqa: E402
 from skyref.io.exr import read_sky_exr, write_sky_exr  # noqa: E402
-from skyref.io.json_numpy import numpy_default  # noqa: E402
 from skyref.render import render_sky  # noqa: E402
 from skyref.scene import Scene  # noqa: E402
 
 ROOT = os.path.join(os.path.dirname(__file__), "..")
-RESULTS = os.path.join(ROOT, "results")
 WORK = os.path.join(ROOT, "out", "polarized-audit")
 MODES = ("scalar", "polarized")
 PASSES = 16
@@ -162,11 +163,7 @@ def main():
               "entries": [{"entry": e.key, "method": e.method, "label": e.label,
                            "scalar": summaries["scalar"][e.key], "polarized": summaries["polarized"][e.key]}
                           for e in entries]}
-    with atomic_write(os.path.join(RESULTS, "polarized_audit.json")) as f:
-        json.dump(report, f, indent=1, default=numpy_default)
-    with atomic_write(os.path.join(RESULTS, "polarized_audit.md")) as f:
-        f.write(markdown(report))
-    print(f"wrote {os.path.join(RESULTS, 'polarized_audit.md')}")
+    print(f"wrote {write_results('polarized_audit', report, markdown(report))}")
 
 
 if __name__ == "__main__":

@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import datetime
-import json
 import os
 import platform
 import sys
@@ -27,16 +26,16 @@ import time
 
 import numpy as np
 
+sys.path.insert(0, os.path.dirname(__file__))
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
+from results_files import write_results  # noqa: E402
+
 from skyref.batch.grid import load_grid  # noqa: E402
-from skyref.io.atomic import atomic_write  # noqa: E402
-from skyref.io.json_numpy import numpy_default  # noqa: E402
 from skyref.render import render_sky, render_to_error  # noqa: E402
 from skyref.scene import Scene  # noqa: E402
 
 ROOT = os.path.join(os.path.dirname(__file__), "..")
-RESULTS = os.path.join(ROOT, "results")
 
 #: (name, grid, sky index, polarized, target relative error or None for the grid's): the Hosek
 #: training grid's mirror pairs on column centres, the LUT audit's on column edges and its
@@ -126,11 +125,7 @@ def main():
     report = {"date": datetime.datetime.now().isoformat(timespec="minutes"),
               "machine": platform.processor() or platform.machine(),
               "skies": {name: measure(name, *rest) for name, *rest in SKIES}}
-    os.makedirs(RESULTS, exist_ok=True)
-    with atomic_write(os.path.join(RESULTS, "symmetry.json")) as f:
-        json.dump(report, f, indent=1, default=numpy_default)
-    with atomic_write(os.path.join(RESULTS, "symmetry.md")) as f:
-        f.write(markdown(report))
+    write_results("symmetry", report, markdown(report))
     print(markdown(report))
 
 
