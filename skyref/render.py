@@ -365,6 +365,20 @@ class AdaptiveProgress:
                              if bool(kept["planned"]) else None)
         return True
 
+    @staticmethod
+    def describe(path, target_relative_error: float) -> str | None:
+        """How far the render kept in the checkpoint ``path`` is, in a few words (rounds done, the
+        share of its views at ``target_relative_error``, render time); None while there is none."""
+        try:
+            with np.load(path) as kept:
+                radiance, variance = kept["orders"].sum(axis=1), kept["variance"]
+                rounds, elapsed = int(kept["round"]), float(kept["elapsed"])
+        except (FileNotFoundError, OSError, KeyError, ValueError):     # not written yet, or replaced meanwhile
+            return None
+        error = pixel_relative_error(radiance[:, 0], np.sqrt(variance[:, 0]))
+        return (f"{rounds} round{'s' if rounds != 1 else ''} done, {np.mean(error <= target_relative_error):.0%} of "
+                f"{error.size} views at {100 * target_relative_error:g}%, {elapsed:.0f} s")
+
 
 def _adaptive_key(scene, target_relative_error, seeds, max_spp, initial_spp, views) -> str:
     """What an adaptive render is, as a digest: the scene (its render settings too), the target,

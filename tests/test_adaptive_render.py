@@ -1,5 +1,7 @@
 """Rendering to a per-direction error target, and rendering only the directions a consumer uses."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -115,6 +117,9 @@ def test_a_killed_adaptive_render_resumes_at_its_next_launch_to_the_same_sky(mi,
     with pytest.raises(KeyboardInterrupt):
         render_to_error(scene, 0.01, checkpoint=path, **arguments)
     assert path.exists()
+    # what a batch's progress bar says of it: rounds done, views at the target, render time
+    assert re.fullmatch(r"[12] rounds? done, \d+% of 24 views at 1%, \d+ s", render.AdaptiveProgress.describe(path, 0.01))
+    assert render.AdaptiveProgress.describe(tmp_path / "none.npz", 0.01) is None
     launches.clear()
     kill_after = None
     resumed = render_to_error(scene, 0.01, checkpoint=path, **arguments)

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import logging
 import os
+import threading
 import time
 
 from skyref.batch.grid import MAX_ROUNDS, Grid
@@ -23,6 +24,7 @@ from skyref.batch.store import NETCDF, BatchStore
 from skyref.batch.worker import render_and_store
 from skyref.errors import ParameterError
 from skyref.extras import require
+from skyref.render import AdaptiveProgress
 from skyref.validation import check_int
 
 __all__ = ["make_task", "SCHEDULER_TIMEOUT_S", "check_workers", "local_cluster", "connect", "run_batch"]
@@ -35,6 +37,9 @@ def make_task(grid: Grid, spec, variant, drjit_threads) -> dict:
 
 #: Seconds to wait for a dask scheduler named by ``--scheduler`` to answer.
 SCHEDULER_TIMEOUT_S = 10
+
+#: Seconds between looks at the checkpoints of the skies in flight (the progress bar's note).
+PARTIAL_LOOK_S = 10.0
 
 
 def check_workers(workers: int | None) -> int:
@@ -128,16 +133,19 @@ def _run(grid, store, first_scene, client, threads, variant, verify, progress, l
         log(f"skyref batch: {part}{len(grid)} skies on a {' x '.join(map(str, grid.shape))} grid, "
             f"{done_before} already finished, output {store.directory}")
         start = time.perf_counter()
-        failed = {}
-        bar = None
+        failed, in_flight = {}, {}
+        bar, stop, watcher = None, threading.Event(), None
         if progress:
             from tqdm import tqdm  # lazy: tqdm's import cost, paid only with a progress bar
 
             bar = tqdm(total=len(indices), initial=done_before, unit="sky", desc="skyref batch", smoothing=0.1)
+            if grid.output.target_relative_error is not None:
+                watcher = threading.Thread(target=_note_skies_in_flight, daemon=True,
+                                           args=(store, in_flight, grid.output.target_relative_error, bar, stop))
+                watcher.start()
         try:
             window = 2 * max(1, len(client.scheduler_info(n_workers=-1)["workers"]))
             queue = as_completed()
-            in_flight = {}
 
             def submit_next():
                 spec = next(pending, None)
@@ -160,6 +168,10 @@ def _run(grid, store, first_scene, client, threads, variant, verify, progress, l
                     bar.update(1)
                 submit_next()
         finally:
+            stop.set()
+            if watcher is not None:
+                watcher.join()
+                bar.set_postfix_str("")         # no note left of the last sky in flight
             if bar is not None:
                 bar.close()
         manifest = store.write_manifest()
@@ -171,3 +183,16 @@ def _run(grid, store, first_scene, client, threads, variant, verify, progress, l
     manifest.update(failed=failed, wall_time_s=time.perf_counter() - start,
                     netcdf=store.netcdf_path if netcdf and not unfinished else None)
     return manifest
+
+
+def _note_skies_in_flight(store, in_flight: dict, target_relative_error: float, bar, stop) -> None:
+    """Until ``stop`` is set, say on ``bar`` how far each sky in flight is, from its checkpoint
+    (:meth:`skyref.render.AdaptiveProgress.describe`): one sky of a hard grid can take hours."""
+    while not stop.wait(PARTIAL_LOOK_S):
+        try:
+            specs = list(in_flight.values())
+        except RuntimeError:            # changed while it was read: look again next time
+            continue
+        notes = [f"{spec.sky_id}: {note}" for spec in specs
+                 if (note := AdaptiveProgress.describe(store.checkpoint_path(spec.sky_id), target_relative_error))]
+        bar.set_postfix_str("; ".join(notes))
