@@ -9,14 +9,16 @@ import pytest
 from skyref.audit.metrics import _statistics, shared_estimates
 from skyref.errors import ParameterError
 from skyref.render import render_sky, render_to_error, rendered_pixels
-from skyref.scene import Camera, RenderSettings, Scene, SceneObject, Sun
+from skyref.scene import Camera, Observer, RenderSettings, Scene, SceneObject, Sun
 from skyref.symmetry import view_groups
 
 
-def scene_with(sun, width=64, height=32, **render):
+def scene_with(sun, width=64, height=32, altitude_m=100.0, **render):
+    """A scene seen from ``altitude_m`` (default 100 m: views below the horizon meet the ground
+    at different points, paired by the mirror alone; at 0 they all meet it at the observer's feet)."""
     settings = {"pixel_sampling": "centre", **render}
-    return Scene(sun=sun, camera=Camera(width=width, height=height), wavelengths="rgb",
-                 render=RenderSettings(**settings))
+    return Scene(sun=sun, observer=Observer(altitude_m), camera=Camera(width=width, height=height),
+                 wavelengths="rgb", render=RenderSettings(**settings))
 
 
 def pixel_angles(width, height):
@@ -57,6 +59,21 @@ def test_with_the_sun_at_the_zenith_a_row_is_one_view():
     assert not mirrored.any()
 
 
+@pytest.mark.parametrize("sun", [Sun(60.0, 180.0), Sun(0.0, 180.0), Sun(60.0, 10.0)], ids=["mirror", "zenith sun", "no mirror"])
+def test_an_observer_on_the_ground_sees_one_ground_below_the_horizon(sun):
+    """At altitude 0 every view below the horizon (rows 16-31 of 32) takes the estimate of the
+    first of them, unmirrored (the ground is unpolarized); the sky's views group as before."""
+    on_ground, above = scene_with(sun, altitude_m=0.0), scene_with(sun)
+    pixels = rendered_pixels(on_ground)
+    groups, mirrored = view_groups(on_ground, pixels)
+    zenith, _ = pixel_angles(64, 32)
+    below = zenith > 90.0
+    assert np.all(groups[below] == 16 * 64) and not mirrored[below].any()
+    sky_groups, sky_mirrored = view_groups(above, pixels)
+    assert np.array_equal(groups[~below], sky_groups[~below]) and np.array_equal(mirrored[~below], sky_mirrored[~below])
+    assert np.unique(groups).size == np.unique(sky_groups[~below]).size + 1
+
+
 @pytest.mark.parametrize("case", ["sun off the columns' symmetry", "area sampling", "object"])
 def test_no_view_is_shared_where_the_symmetry_does_not_hold(case):
     scene = {"sun off the columns' symmetry": scene_with(Sun(60.0, 10.0)),
@@ -68,16 +85,19 @@ def test_no_view_is_shared_where_the_symmetry_does_not_hold(case):
     assert np.array_equal(groups, np.arange(pixels.size)) and not mirrored.any()
 
 
-@pytest.mark.parametrize("sun", [Sun(60.0, 180.0), Sun(0.0, 180.0)], ids=["mirror", "zenith sun"])
-def test_a_symmetric_render_agrees_with_one_that_traces_every_pixel(mi, sun):
+@pytest.mark.parametrize("sun,altitude_m,views", [(Sun(60.0, 180.0), 100.0, 64), (Sun(0.0, 180.0), 100.0, 8),
+                                                   (Sun(60.0, 10.0), 0.0, 65)],
+                         ids=["mirror", "zenith sun", "ground at the feet"])
+def test_a_symmetric_render_agrees_with_one_that_traces_every_pixel(mi, sun, altitude_m, views):
     """Delta tracking (the mapping is the subject, not the estimator), 16x8 pixels: the copies
     are bit-identical, and every pixel agrees with an independent render of every pixel within
     the standard errors. A wrong partner (a pixel towards the sun for one away from it) differs
-    by tens of percent, hundreds of standard errors at these ~1-3% errors."""
-    scene = scene_with(sun, 16, 8, estimator="delta_tracking")
+    by tens of percent, hundreds of standard errors at these ~1-3% errors; seen from 100 m, the
+    ground below differs from view to view by its air in between."""
+    scene = scene_with(sun, 16, 8, altitude_m=altitude_m, estimator="delta_tracking")
     symmetric = render_sky(scene, spp=4096, passes=16, seed=7)
     everything = render_sky(scene, spp=4096, passes=16, seed=8, symmetry=False)
-    assert symmetric.metadata["views_traced"] == (64 if sun.zenith_deg else 8)
+    assert symmetric.metadata["views_traced"] == views
     assert everything.metadata["views_traced"] == 128
     flat = symmetric.radiance.reshape(128, -1)
     groups, _ = view_groups(scene, np.arange(128))
