@@ -32,29 +32,47 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 from results_files import write_results  # noqa: E402
 
 from skyref.batch.grid import load_grid  # noqa: E402
-from skyref.render import render_sky, render_to_error  # noqa: E402
+from skyref.render import render_sky, render_to_error, rendered_pixels  # noqa: E402
 from skyref.scene import Scene  # noqa: E402
+from skyref.symmetry import MIRROR_STOKES_SIGNS, view_groups  # noqa: E402
 
 ROOT = os.path.join(os.path.dirname(__file__), "..")
 
 #: (name, grid, sky index, polarized, target relative error or None for the grid's): the Hosek
-#: training grid's mirror pairs on column centres, the LUT audit's on column edges and its
-#: zenith sun (one view per row), and a polarized sky (U and V turned over in the copies).
+#: training grid's mirror pairs on column centres (sky only), the LUT audit's on column edges
+#: with the ground at the observer's feet (one view below the horizon), its zenith sun (one view
+#: per row), a hazy sky, and a polarized one (U and V turned over in the copies).
 SKIES = (
     ("Hosek training: turbidity 5, albedo 0, sun zenith 52", "grids/hosek_training.toml", 113, False, None),
     ("LUT audit: clear, ground, sun zenith 60", "grids/lut_audit.toml", 2, False, None),
     ("LUT audit: clear, ground, sun at the zenith", "grids/lut_audit.toml", 0, False, None),
+    ("LUT audit: hazy (T=6), ground, sun zenith 30", "grids/lut_audit.toml", 43, False, None),
     ("LUT audit: clear, ground, sun zenith 60, polarized", "grids/lut_audit.toml", 2, True, 0.01),
 )
 #: The full render's seeds are the grid's plus this: an independent estimate.
 OTHER_SEEDS = 1_000_003
 
 
-def agreement(a, b, a_error, b_error) -> dict:
-    """Mean z^2 and max |z| of a - b over their combined standard error, where that is > 0."""
-    error = np.hypot(a_error, b_error)
-    valid = np.isfinite(a) & np.isfinite(b) & (error > 0)
-    z = (a[valid] - b[valid]) / error[valid]
+def agreement(scene, symmetric, every_pixel, symmetric_error, every_pixel_error, signs=1.0) -> dict:
+    """Each independent estimate of the symmetric render against the full render's pixels that
+    took it: z = (estimate - mean of those pixels) / combined standard error, per group of
+    :func:`skyref.symmetry.view_groups` and wavelength (one z per estimate: a copied estimate is one
+    noise draw, and counted once per copy it would weigh as many). ``signs``: what a mirrored pixel's
+    value is multiplied by to be that of its group's first (U: -1). Mean z^2 and max |z| where the
+    combined error is > 0."""
+    pixels = rendered_pixels(scene)
+    groups, mirrored = view_groups(scene, pixels)
+    flat = [np.asarray(x).reshape(-1, x.shape[-1])[pixels].astype(np.float64)
+            for x in (symmetric, every_pixel, symmetric_error, every_pixel_error)]
+    a, b, a_error, b_error = flat
+    b = b * np.where(mirrored, signs, 1.0)[:, None]
+    first, group = np.unique(groups, return_inverse=True)
+    count = np.bincount(group)[:, None]
+    b_mean = np.stack([np.bincount(group, weights=column) for column in b.T], axis=1) / count
+    b_mean_error = np.sqrt(np.stack([np.bincount(group, weights=column ** 2) for column in b_error.T], axis=1)) / count
+    error = np.hypot(a_error[first], b_mean_error)
+    valid = error > 0
+    z = (a[first][valid] - b_mean[valid]) / error[valid]
     return {"mean_z2": float(np.mean(z ** 2)), "max_abs_z": float(np.max(np.abs(z))), "values": int(z.size)}
 
 
@@ -80,7 +98,7 @@ def measure(name, grid_path, index, polarized, target) -> dict:
     if polarized:
         for k, label in ((1, "Q"), (2, "U")):
             components[label] = (a.stokes[..., k, :], b.stokes[..., k, :], a.stokes_error[..., k, :],
-                                 b.stokes_error[..., k, :])
+                                 b.stokes_error[..., k, :], MIRROR_STOKES_SIGNS[k])
     return {"grid": grid_path, "sky_id": spec.sky_id, "coordinates": spec.coordinates, "polarized": polarized,
             "target_relative_error": target, "pixels": int(np.isfinite(a.radiance[..., 0]).sum()),
             "views_traced": {"symmetric": a.metadata["views_traced"], "every_pixel": b.metadata["views_traced"]},
@@ -89,7 +107,7 @@ def measure(name, grid_path, index, polarized, target) -> dict:
             "mean_spp": {"symmetric": a.metadata["spp"], "every_pixel": b.metadata["spp"]},
             "pixels_at_target": {"symmetric": a.metadata["pixels_at_target"],
                                  "every_pixel": b.metadata["pixels_at_target"]},
-            "agreement": {label: agreement(*values) for label, values in components.items()}}
+            "agreement": {label: agreement(scene, *values) for label, values in components.items()}}
 
 
 def markdown(report) -> str:
@@ -98,8 +116,9 @@ def markdown(report) -> str:
              "2 cores, other batches running beside it). Each sky of a consumer's grid rendered as its batch renders "
              "it (adaptive per direction to the target, the grid's sample cap and 16 passes), tracing one view of "
              "each symmetry group (`skyref/symmetry.py`) and, with other seeds, every pixel. CPU: process time of "
-             "the render, kernels compiled before. Agreement: z = difference / combined standard error per pixel "
-             "and wavelength (and Stokes component), over the sky's pixels.", "",
+             "the render, kernels compiled before. Agreement: each independent estimate of the symmetric render "
+             "(one per group of views) against the mean of the full render's pixels in its group, z = difference / "
+             "combined standard error, per wavelength (and Stokes component; a mirrored pixel's U turned over).", "",
              "| sky | target | views traced | CPU s | speed-up | mean spp | mean z^2 | max abs z |",
              "|---|---:|---:|---:|---:|---:|---|---|"]
     for name, r in report["skies"].items():
@@ -113,9 +132,10 @@ def markdown(report) -> str:
               "(a sky's cost is not spread evenly over its directions: the copies of the brightest, cheapest ones "
               "save least). A mean z^2 near 1 says the two renders are the same sky within their stated errors (with "
               "standard errors from 16 batches, t-distributed z's have a mean square up to 15/13 = 1.15 and "
-              "heavier tails than a normal's); a copied estimate is one noise draw, so its z appears once per "
-              "copy. Below the horizon of a ground-level observer the ground is unpolarized (Q = U = 0 exactly): "
-              "Q and U count the sky's pixels only.", ""]
+              "heavier tails than a normal's); one z per estimate, since a copied estimate is one noise draw (per "
+              "pixel, the ground of a ground-level observer, one estimate copied to half the sky's pixels, would "
+              "weigh as much as every other estimate together). The ground is unpolarized (Q = U = 0 exactly): Q "
+              "and U count the sky's estimates only.", ""]
     return "\n".join(lines)
 
 
