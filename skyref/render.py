@@ -15,6 +15,7 @@ the sky. Adaptive rounds aim at I's error.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import json
@@ -404,8 +405,9 @@ def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, in
     the share of pixels at the target and the 95th percentile of the relative error. A polarized scene (``render.polarized``)
     pools every Stokes component and aims at I's error. ``symmetry``: as in :func:`render_sky`.
     ``checkpoint``: a file (``.npz``) where the render keeps its state after every launch
-    (:class:`AdaptiveProgress`), and from which a call with the same arguments resumes; it is
-    left in place (a later call returns the finished sky at once), for the caller to remove."""
+    (:class:`AdaptiveProgress`), and from which a call with the same arguments resumes (a file
+    there of another render is removed at the start); it is left in place (a later call returns
+    the finished sky at once), for the caller to remove."""
     check_number("target_relative_error", target_relative_error, 1e-5, 1.0)
     passes = scene.render.passes
     spp = min(initial_spp or max(16 * passes, 64), max_spp)
@@ -418,8 +420,9 @@ def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, in
     views = pixels[traced]
     pool = PixelPool(views.size, len(ORDER_NAMES), len(scene.wavelengths_nm), stokes_components(scene))
     progress = AdaptiveProgress(pool, _adaptive_key(scene, target_relative_error, seeds, max_spp, spp, views))
-    if checkpoint is not None:
-        progress.resume(checkpoint)
+    if checkpoint is not None and not progress.resume(checkpoint):
+        with contextlib.suppress(FileNotFoundError):    # another render's state: not shown as this one's
+            os.remove(checkpoint)
 
     def plan(round_index, seed) -> list:
         """The launches of a round: (samples per pass, positions in ``views``, seed) each."""

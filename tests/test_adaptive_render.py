@@ -90,7 +90,7 @@ def test_a_killed_adaptive_render_resumes_at_its_next_launch_to_the_same_sky(mi,
     traces only the launches it had not done, and returns the sky an uninterrupted render does,
     bit for bit (the same launches with the same seeds: a round planned again from part-pooled
     estimates would trace other launches); a finished checkpoint traces nothing; a checkpoint
-    of another render (another target) is not used."""
+    of another render (another target) is not used, and removed before the first launch."""
     import skyref.render as render
 
     scene = Scene(sun=Sun(zenith_deg=40.0), camera=Camera(width=8, height=6), wavelengths="rgb",
@@ -102,16 +102,18 @@ def test_a_killed_adaptive_render_resumes_at_its_next_launch_to_the_same_sky(mi,
     def counted(self, pixels, *args, **kwargs):
         if len(launches) == kill_after:
             raise KeyboardInterrupt("killed")
+        if not launches:
+            checkpoint_at_start.append(path.exists())
         launches.append(len(pixels))
         return real_passes(self, pixels, *args, **kwargs)
 
     monkeypatch.setattr(render._PixelRenderer, "passes", counted)
-    kill_after = None
+    path = tmp_path / "partial" / "sky.npz"
+    kill_after, checkpoint_at_start = None, []
     whole = render_to_error(scene, 0.01, **arguments)
     every_launch = list(launches)
     assert len(every_launch) >= 5                            # rounds with several counts each
 
-    path = tmp_path / "partial" / "sky.npz"
     launches.clear()
     kill_after = 3
     with pytest.raises(KeyboardInterrupt):
@@ -132,5 +134,7 @@ def test_a_killed_adaptive_render_resumes_at_its_next_launch_to_the_same_sky(mi,
     launches.clear()
     again = render_to_error(scene, 0.01, checkpoint=path, **arguments)
     assert launches == [] and np.array_equal(again.radiance, whole.radiance, equal_nan=True)
+    checkpoint_at_start.clear()
     other = render_to_error(scene, 0.02, checkpoint=path, **arguments)     # its own render, from the start
     assert launches[0] == views and other.metadata["target_relative_error"] == 0.02
+    assert checkpoint_at_start == [False]          # the other render's file was gone before its first launch
