@@ -28,6 +28,7 @@ from skyref.audit.advise import advice_lines, load_map, parse_tolerance
 from skyref.audit.speed_map import ENTRIES, TRUTH_GRID, entry_summary, evaluate_map, fitted_entries, truth_skies
 from skyref.batch import load_grid, run_batch
 from skyref.batch.merge import import_skies
+from skyref.batch.store import BatchStore
 from skyref.envmap import (DEFAULT_WIDTH, ORIENTATIONS, SUN_MODES, check_width, render_environment_map, snippet_path,
                            write_environment_map)
 from skyref.errors import ParameterError, SkyrefSetupError
@@ -166,6 +167,23 @@ def cmd_timelapse(args) -> int:
     return 0
 
 
+def batch_progress_line(grid, indices=None) -> str:
+    """What the grid's output directory holds of the skies ``indices`` (default: all): finished
+    ones and their CPU time, skies rendered part-way, and how many are still to go."""
+    store = BatchStore(grid)
+    stored = store.stored_fingerprint()
+    if stored is None:
+        return "  nothing rendered yet"
+    if stored != grid.fingerprint():
+        return "  the output directory holds another grid's skies: a run would refuse it"
+    indices = range(len(grid)) if indices is None else indices
+    progress = store.progress(indices)
+    partial = progress["partial"]
+    line = (f"  {progress['finished']} of {len(indices)} skies finished ({progress['cpu_s'] / 3600.0:.2f} CPU hours), "
+            f"{len(partial)} rendered part-way, {len(indices) - progress['finished'] - len(partial)} not started")
+    return line + "".join(f"\n  {sky_id}: {note}" for sky_id, note in partial.items())
+
+
 def cmd_batch(args) -> int:
     grid = load_grid(args.grid)
     indices = grid.sky_numbers(args.skies) if args.skies is not None else None
@@ -176,6 +194,7 @@ def cmd_batch(args) -> int:
         grid.validate()
         print(f"{args.grid}: {len(grid)} skies ({' x '.join(f'{k}[{len(v)}]' for k, v in grid.axes.items())}), "
               f"output {grid.output.directory}")
+        print(batch_progress_line(grid, indices))
         return 0
     if args.import_from:
         corrupt = 0
@@ -390,7 +409,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--verify", action="store_true", help="check finished skies' SHA-256 before skipping them")
     p.add_argument("--netcdf", action="store_true", help="also write dataset.nc (netCDF-3, CF) once every sky "
                    "is finished")
-    p.add_argument("--dry-run", action="store_true", help="check the grid and print its size; render nothing")
+    p.add_argument("--dry-run", action="store_true", help="check the grid, print its size and how far its output "
+                   "directory is (skies finished, their CPU hours, skies rendered part-way); render nothing")
     p.add_argument("--skies", metavar="LIST", help="render only these sky numbers, e.g. 0-9,20 (a part of the "
                    "grid for one machine: the same ids and seeds as the whole grid's run)")
     p.add_argument("--import-from", action="append", metavar="DIR",

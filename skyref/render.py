@@ -378,7 +378,7 @@ class AdaptiveProgress:
             return None
         error = pixel_relative_error(radiance[:, 0], np.sqrt(variance[:, 0]))
         return (f"{rounds} round{'s' if rounds != 1 else ''} done, {np.mean(error <= target_relative_error):.0%} of "
-                f"{error.size} views at {100 * target_relative_error:g}%, {elapsed:.0f} s")
+                f"{error.size} views at {100 * target_relative_error:g}%, render time {elapsed:.0f} s")
 
 
 def _adaptive_key(scene, target_relative_error, seeds, max_spp, initial_spp, views) -> str:

@@ -121,7 +121,7 @@ def test_a_killed_adaptive_render_resumes_at_its_next_launch_to_the_same_sky(mi,
     assert path.exists()
     # what a batch's progress bar says of it: rounds done, views at the target, render time
     views = whole.metadata["views_traced"]
-    assert re.fullmatch(rf"[12] rounds? done, \d+% of {views} views at 1%, \d+ s", render.AdaptiveProgress.describe(path, 0.01))
+    assert re.fullmatch(rf"[12] rounds? done, \d+% of {views} views at 1%, render time \d+ s", render.AdaptiveProgress.describe(path, 0.01))
     assert render.AdaptiveProgress.describe(tmp_path / "none.npz", 0.01) is None
     launches.clear()
     kill_after = None

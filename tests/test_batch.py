@@ -3,6 +3,7 @@ kill -9, and the dataset matching the EXRs."""
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -355,6 +356,9 @@ def test_an_adaptive_sky_killed_mid_render_resumes_from_its_checkpoint(write_gri
     os.killpg(process.pid, signal.SIGKILL)
     process.wait()
     assert os.path.exists(checkpoint) and _markers(killed_dir) == [], "the kill must land mid-render"
+    dry_run = subprocess.run([*_batch_command(killed)[:-3], "--dry-run"], capture_output=True, text=True)
+    assert "0 of 1 skies finished (0.00 CPU hours), 1 rendered part-way, 0 not started" in dry_run.stdout
+    assert re.search(r"sky-0: \d+ rounds? done, \d+% of \d+ views at 1%, render time \d+ s", dry_run.stdout)
     with np.load(checkpoint) as kept:
         assert int(kept["samples"].min()) > 0                  # the first round was kept
         state = dict(kept)

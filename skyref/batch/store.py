@@ -43,6 +43,7 @@ import numpy as np
 from skyref.batch.dataset import layout, write_netcdf
 from skyref.errors import ParameterError
 from skyref.io.atomic import atomic_write
+from skyref.render import AdaptiveProgress
 from skyref.validation import check_output_directory
 
 __all__ = ["DATASET", "NETCDF", "sha256_of", "marker_of_exr", "BatchStore"]
@@ -160,6 +161,25 @@ class BatchStore:
             return not verify or sha256_of(self.exr_path(sky_id)) == marker["exr_sha256"]
         except (OSError, ValueError, KeyError):
             return False
+
+    def progress(self, indices) -> dict:
+        """How far the run of the sky numbers ``indices`` is, from the directory alone (nothing is
+        written): ``finished`` skies and the CPU seconds their markers record (``cpu_s``), and
+        ``partial``, sky id -> how far each sky rendered part-way is, from its checkpoint
+        (:meth:`skyref.render.AdaptiveProgress.describe`)."""
+        finished, cpu_s, partial = 0, 0.0, {}
+        target = self.grid.output.target_relative_error
+        for index in indices:
+            sky_id = self.grid.sky_id(index)
+            if self.is_finished(sky_id):
+                with open(self.marker_path(sky_id)) as f:
+                    cpu_s += json.load(f).get("task_cpu_s", 0.0)
+                finished += 1
+            elif target is not None:
+                note = AdaptiveProgress.describe(self.checkpoint_path(sky_id), target)
+                if note is not None:
+                    partial[sky_id] = note
+        return {"finished": finished, "cpu_s": cpu_s, "partial": partial}
 
     def write_sky(self, index: int, sky):
         """Write ``sky`` (a :class:`~skyref.sky.Sky` whose metadata hold ``spp`` and
