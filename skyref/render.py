@@ -36,7 +36,7 @@ from skyref.projection import camera_to_world, pixel_directions
 from skyref.scene import RenderSettings
 from skyref.sky import ORDER_NAMES, STOKES, Sky
 from skyref.symmetry import copy_estimates, view_groups
-from skyref.validation import check_choice, check_number
+from skyref.validation import check_choice, check_number, check_output_file
 
 __all__ = ["MAX_IMAGE_VALUES", "GEOMETRIES", "sensor_dict", "build_integrator", "stokes_components",
            "check_image_size", "render_sky",
@@ -409,6 +409,8 @@ def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, in
     there of another render is removed at the start); it is left in place (a later call returns
     the finished sky at once), for the caller to remove."""
     check_number("target_relative_error", target_relative_error, 1e-5, 1.0)
+    if checkpoint is not None:
+        check_output_file(checkpoint, ".npz", "checkpoint")
     passes = scene.render.passes
     spp = min(initial_spp or max(16 * passes, 64), max_spp)
     if spp < passes:

@@ -138,3 +138,11 @@ def test_a_killed_adaptive_render_resumes_at_its_next_launch_to_the_same_sky(mi,
     other = render_to_error(scene, 0.02, checkpoint=path, **arguments)     # its own render, from the start
     assert launches[0] == views and other.metadata["target_relative_error"] == 0.02
     assert checkpoint_at_start == [False]          # the other render's file was gone before its first launch
+
+
+@pytest.mark.parametrize("checkpoint,reason", [("sky.exr", "wrong extension"), ("folder.npz", "an existing directory")])
+def test_render_to_error_refuses_a_bad_checkpoint_before_any_work(tmp_path, checkpoint, reason):
+    (tmp_path / "folder.npz").mkdir()
+    scene = Scene(camera=Camera(width=4, height=2), wavelengths="rgb")
+    with pytest.raises(ParameterError, match=rf"checkpoint = .*{reason}"):
+        render_to_error(scene, 0.01, seeds=[1], max_spp=64, checkpoint=tmp_path / checkpoint)
