@@ -321,7 +321,8 @@ class PixelPool:
 class AdaptiveProgress:
     """Where an adaptive render (:func:`render_to_error`) stands: its pooled estimates, the
     rounds done and the seeds they used, the current round's launches (samples per pass, the
-    views, the seed) and how many of them are done, and the render time so far.
+    views, the seed) and how many of them are done, and the render's wall and CPU time so far
+    (over every run that worked on it).
 
     Kept in a checkpoint file (``.npz``, written atomically after every launch) it lets a render
     that was killed part-way resume at its next launch when called again with the same arguments:
@@ -330,19 +331,21 @@ class AdaptiveProgress:
     seed and count, the same samples counted twice."""
 
     #: Bump when the file's layout or the meaning of its values changes: older files are not used.
-    FORMAT = 1
+    FORMAT = 2
 
     def __init__(self, pool: PixelPool, key: str):
         """``key``: what the render is (:func:`_adaptive_key`); a file with another key is not
         used."""
         self.pool, self.key = pool, key
         self.round, self.launches, self.done, self.elapsed, self.used_seeds = 0, None, 0, 0.0, []
+        #: CPU seconds of the process in the render's launches, and of that, the runs' before this one.
+        self.cpu, self.cpu_before = 0.0, 0.0
 
     def save(self, path) -> None:
         pool = self.pool
         launches = self.launches or []
         with atomic_path(path) as tmp, open(tmp, "wb") as f:
-            np.savez(f, key=np.array(self.key), round=self.round, done=self.done, elapsed=self.elapsed,
+            np.savez(f, key=np.array(self.key), round=self.round, done=self.done, elapsed=self.elapsed, cpu=self.cpu,
                      used_seeds=np.asarray(self.used_seeds, dtype=np.int64), planned=self.launches is not None,
                      launch_spp=np.asarray([c for c, _, _ in launches], dtype=np.int64),
                      launch_seeds=np.asarray([s for _, _, s in launches], dtype=np.int64),
@@ -360,6 +363,7 @@ class AdaptiveProgress:
             self.pool.samples[:], self.pool.orders[:], self.pool.variance[:] = \
                 kept["samples"], kept["orders"], kept["variance"]
             self.round, self.done, self.elapsed = int(kept["round"]), int(kept["done"]), float(kept["elapsed"])
+            self.cpu = self.cpu_before = float(kept["cpu"])
             self.used_seeds = [int(seed) for seed in kept["used_seeds"]]
             views = np.split(kept["launch_views"], np.cumsum(kept["launch_sizes"])[:-1])
             self.launches = ([(int(c), v, int(s)) for c, v, s in zip(kept["launch_spp"], views, kept["launch_seeds"])]
@@ -447,9 +451,10 @@ def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, in
             if not progress.launches:
                 break
         for spp_per_pass, members, seed in progress.launches[progress.done:]:
-            start = time.perf_counter()
+            start, start_cpu = time.perf_counter(), time.process_time()
             per_pass = renderer.passes(views[members], spp_per_pass, passes, seed)
             progress.elapsed += time.perf_counter() - start
+            progress.cpu += time.process_time() - start_cpu
             pool.add(members, spp_per_pass * passes, *renderer.statistics(per_pass))
             progress.done += 1
             if checkpoint is not None:
@@ -462,7 +467,8 @@ def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, in
     samples = pool.samples[estimate_of]
     metadata = renderer.metadata(round(samples.sum() / max(pixels.size, 1)), passes, progress.used_seeds,
                                  progress.elapsed, int(pool.samples.sum()), views.size)
-    metadata.update(target_relative_error=target_relative_error,
+    metadata.update(target_relative_error=target_relative_error, render_cpu_s=progress.cpu,
+                    render_cpu_s_before_resume=progress.cpu_before,
                     spp_range=[int(samples.min()), int(samples.max())] if pixels.size else [0, 0],
                     pixels_at_target=float(np.mean(error <= target_relative_error)) if pixels.size else 1.0)
     orders = copy_estimates(pool.orders, estimate_of, mirrored, scene.render.polarized)

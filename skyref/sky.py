@@ -40,7 +40,7 @@ SAVE_FORMATS = {".exr": "spectral OpenEXR", ".png": "tone-mapped sRGB preview"}
 #: Metadata that differ between runs of the same render (timings): shown to the user, kept in
 #: batch markers and manifests, never written into data files, so that the same seed gives the
 #: same bytes.
-TIMING_METADATA = ("render_time_s", "samples_per_second")
+TIMING_METADATA = ("render_time_s", "samples_per_second", "render_cpu_s", "render_cpu_s_before_resume")
 
 
 def degree_of_linear_polarization(stokes, axis: int = -2) -> np.ndarray:

@@ -362,8 +362,9 @@ def test_an_adaptive_sky_killed_mid_render_resumes_from_its_checkpoint(write_gri
     with np.load(checkpoint) as kept:
         assert int(kept["samples"].min()) > 0                  # the first round was kept
         state = dict(kept)
-    # a render time the rerun can only have from the checkpoint (it changes no data): that it was resumed
-    state["elapsed"] = np.float64(1e6)
+    # a render time and CPU the rerun can only have from the checkpoint (they change no data): that
+    # it was resumed, and that the marker counts the killed run's CPU
+    state["elapsed"], state["cpu"] = np.float64(1e6), np.float64(2e6)
     with open(checkpoint, "wb") as f:
         np.savez(f, **state)
 
@@ -374,3 +375,4 @@ def test_an_adaptive_sky_killed_mid_render_resumes_from_its_checkpoint(write_gri
     assert open(exr_a, "rb").read() == open(exr_b, "rb").read()
     marker = json.load(open(os.path.join(killed_dir, "markers", "sky-0.json")))
     assert marker["render_time_s"] > 1e6 and len(marker["seed"]) >= 2     # resumed; more than one round
+    assert marker["task_cpu_s"] > 2e6

@@ -52,7 +52,8 @@ def render_and_store(task: dict) -> dict:
               "exr_bytes": os.path.getsize(exr_path), "spp": meta["spp"], "seed": meta["seed"],
               "relative_error_p95": meta["relative_error_p95"], "render_time_s": meta["render_time_s"],
               "task_time_s": time.perf_counter() - start, "variant": meta["variant"],
-              "task_cpu_s": time.process_time() - start_cpu,
+              # a resumed sky's CPU includes what the runs before this one spent on it
+              "task_cpu_s": time.process_time() - start_cpu + meta.get("render_cpu_s_before_resume", 0.0),
               "worker_peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
               "finished_at": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
     store.write_marker(spec.sky_id, marker)
