@@ -23,6 +23,7 @@ import skyref
 from skyref import _llvm
 from skyref.analytic import MODELS, analytic_model
 from skyref.analytic import REGISTRY as MODEL_REGISTRY
+from skyref.analytic.hosek import skyref_fit_directory
 from skyref.atmosphere import PRESETS
 from skyref.audit.advise import advice_lines, load_map, parse_tolerance
 from skyref.audit.speed_map import ENTRIES, TRUTH_GRID, entry_summary, evaluate_map, fitted_entries, truth_skies
@@ -434,8 +435,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("report", help="the speed-vs-error map of every method: results/README.md, plots, map.json")
     p.add_argument("--truth-grid", default=TRUTH_GRID, help="grid of the ground-truth skies")
-    p.add_argument("--coefficients", default=os.path.join("out", "hosek-coefficients"),
-                   help="directory of fitted Hosek-Wilkie / Perez tables ('skyref fit --out'), included if present")
+    p.add_argument("--coefficients", default=skyref_fit_directory(),
+                   help="directory of fitted Hosek-Wilkie / Perez tables ('skyref fit --out'), included if present "
+                   "(default: the fit shipped with skyref, skyref/analytic/data/skyref_fit)")
     p.add_argument("--cache", default=os.path.join("out", "report", "cache"), help="cache of (method, sky) results")
     p.add_argument("--results", default="results", help="where README.md and report/ are written")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress messages")

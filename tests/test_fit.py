@@ -437,3 +437,47 @@ def test_cli_refusals_leave_no_output_directory(tmp_path, argv, name):
         run_cli(["--grid", str(batch), *argv, "-q"])
     assert info.value.name == name
     assert not (tmp_path / "coefficients").exists() and not (tmp_path / "file" / "out").exists()
+
+
+# --- the fit shipped with skyref ---------------------------------------------------------------------
+
+@pytest.mark.skipif(shutil.which("gcc") is None, reason="gcc is not installed (run.sh installs it)")
+def test_shipped_fit_is_one_table_in_three_forms_fitted_to_the_whole_training_grid(tmp_path):
+    """skyref/analytic/data/skyref_fit: the npz, the JSON and the C headers hold the same tables
+    (spectral, CIE XYZ, RGB), fitted to every sky of grids/hosek_training.toml at its error
+    target; the published C evaluator compiled against the three headers gives the table's
+    radiances."""
+    from skyref.analytic.hosek import skyref_fit_directory
+    from skyref.batch.grid import load_grid
+
+    directory = skyref_fit_directory()
+    tables, metadata = read_tables(os.path.join(directory, "hosek.npz"))
+    from_json, json_metadata = read_tables(os.path.join(directory, "hosek.json"))
+    assert set(tables) == set(from_json) == {"spectral", "xyz", "rgb"}
+    assert metadata["form"] == json_metadata["form"] == "hosek"
+    for kind, table in tables.items():
+        assert np.array_equal(table.coefficients, from_json[kind].coefficients)
+        assert np.array_equal(table.radiances, from_json[kind].radiances)
+        assert not np.array_equal(table.coefficients, published_table(kind).coefficients)
+    grid = load_grid(os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "grids", "hosek_training.toml"))
+    assert metadata["truth"]["skies"] == len(grid) == 260
+    fitted = np.array(metadata["fits"]["spectral"]["fitted_groups"])
+    assert fitted[1:].all() and not fitted[0].any()   # (channel, albedo, turbidity): 360-720 nm everywhere; 320 nm lies outside the truth
+
+    for kind in tables:
+        shutil.copy(os.path.join(directory, HEADER_NAMES[kind]), tmp_path)
+    program = tmp_path / "hosek_eval"
+    build = subprocess.run(["gcc", "-O2", "-std=c99", "-Wall", "-Wextra", "-Werror", "-I", str(tmp_path),
+                            C_EVALUATOR, "-lm", "-o", str(program)], capture_output=True, text=True)
+    assert build.returncode == 0, build.stderr
+    rng = np.random.default_rng(11)
+    queries, expected = [], []
+    for i in range(300):
+        kind = ("spectral", "xyz", "rgb")[i % 3]
+        channel = int(rng.integers(len(CHANNELS[kind])))
+        elevation, turbidity = rng.uniform(0.0, math.pi / 2), rng.uniform(1, 10)
+        albedo, theta, gamma = rng.uniform(), rng.uniform(0, math.pi / 2), rng.uniform(0, math.pi)
+        queries.append(f"{list(CHANNELS).index(kind)} {channel} {elevation!r} {turbidity!r} {albedo!r} {theta!r} {gamma!r}")
+        expected.append(tables[kind].radiance(theta, gamma, elevation, turbidity, albedo)[channel])
+    run = subprocess.run([str(program)], input="\n".join(queries) + "\n", capture_output=True, text=True, check=True)
+    np.testing.assert_allclose([float(v) for v in run.stdout.split()], expected, rtol=1e-6, atol=0.0)

@@ -58,6 +58,7 @@ from __future__ import annotations
 
 import functools
 import math
+import os
 from dataclasses import dataclass
 from importlib import resources
 
@@ -97,6 +98,7 @@ PEREZ_MIN_COS_THETA = 1e-6
 
 _PUBLISHED = "arhosek_v1.4a.npz"
 _PUBLISHED_SUN = "hosek_solar_radiance.csv"
+_SKYREF_FIT = "skyref_fit"
 
 
 # --- the model forms ---------------------------------------------------------------------------
@@ -353,6 +355,14 @@ def published_table(kind: str = "spectral") -> CoefficientTable:
     "rgb")."""
     return CoefficientTable.from_arrays(published_arrays(), "hosek", kind,
                                         source="Hosek & Wilkie 2012, reference implementation 1.4a")
+
+
+def skyref_fit_directory() -> str:
+    """The directory of skyref's own fit of the Hosek–Wilkie model to its ground truth, shipped
+    with the package (``data/skyref_fit``): ``hosek.npz``, ``hosek.json`` and
+    ``ArHosekSkyModelData_Spectral.h`` in the published layout, what it was fitted to in its
+    ``README.md``. Read it with :func:`skyref.fit.export.read_tables`."""
+    return os.fspath(resources.files("skyref.analytic") / "data" / _SKYREF_FIT)
 
 
 @functools.lru_cache(maxsize=1)
