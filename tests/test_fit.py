@@ -219,14 +219,22 @@ def test_published_npz_reads_as_published_tables():
         assert np.array_equal(table.coefficients, published_table(kind).coefficients)
 
 
+def c_evaluator_radiances(headers, queries) -> np.ndarray:
+    """skyref's C evaluator of the published layout (skyref/fit/c/hosek_eval.c), compiled
+    against the three headers in the folder ``headers`` and run on ``queries`` (its input
+    lines): its radiances."""
+    program = os.path.join(headers, "hosek_eval")
+    build = subprocess.run(["gcc", "-O2", "-std=c99", "-Wall", "-Wextra", "-Werror", "-I", str(headers),
+                            C_EVALUATOR, "-lm", "-o", program], capture_output=True, text=True)
+    assert build.returncode == 0, build.stderr
+    run = subprocess.run([program], input="\n".join(queries) + "\n", capture_output=True, text=True, check=True)
+    return np.array([float(v) for v in run.stdout.split()])
+
+
 @pytest.mark.skipif(shutil.which("gcc") is None, reason="gcc is not installed (run.sh installs it)")
 def test_c_header_compiles_and_c_evaluator_matches_python(tmp_path):
     tables = {kind: perturbed(published_table(kind), 10 + i) for i, kind in enumerate(CHANNELS)}
     write_tables(tables, tmp_path, "hosek")
-    program = tmp_path / "hosek_eval"
-    build = subprocess.run(["gcc", "-O2", "-std=c99", "-Wall", "-Wextra", "-Werror", "-I", str(tmp_path),
-                            C_EVALUATOR, "-lm", "-o", str(program)], capture_output=True, text=True)
-    assert build.returncode == 0, build.stderr
     rng = np.random.default_rng(5)
     queries, expected = [], []
     for i in range(400):
@@ -236,9 +244,7 @@ def test_c_header_compiles_and_c_evaluator_matches_python(tmp_path):
         albedo, theta, gamma = rng.uniform(), rng.uniform(0, math.pi), rng.uniform(0, math.pi)
         queries.append(f"{list(CHANNELS).index(kind)} {channel} {elevation!r} {turbidity!r} {albedo!r} {theta!r} {gamma!r}")
         expected.append(tables[kind].radiance(theta, gamma, elevation, turbidity, albedo)[channel])
-    run = subprocess.run([str(program)], input="\n".join(queries) + "\n", capture_output=True, text=True, check=True)
-    got = np.array([float(v) for v in run.stdout.split()])
-    expected = np.array(expected)
+    got, expected = c_evaluator_radiances(tmp_path, queries), np.array(expected)
     assert got.shape == expected.shape and (expected > 0).mean() > 0.9
     np.testing.assert_allclose(got, expected, rtol=1e-6, atol=0.0)
 
@@ -445,7 +451,7 @@ def test_cli_refusals_leave_no_output_directory(tmp_path, argv, name):
 def test_shipped_fit_is_one_table_in_three_forms_fitted_to_the_whole_training_grid(tmp_path):
     """skyref/analytic/data/skyref_fit: the npz, the JSON and the C headers hold the same tables
     (spectral, CIE XYZ, RGB), fitted to every sky of grids/hosek_training.toml at its error
-    target; the published C evaluator compiled against the three headers gives the table's
+    target; the C evaluator compiled against the three headers gives the table's
     radiances."""
     from skyref.analytic.hosek import skyref_fit_directory
     from skyref.batch.grid import load_grid
@@ -466,10 +472,6 @@ def test_shipped_fit_is_one_table_in_three_forms_fitted_to_the_whole_training_gr
 
     for kind in tables:
         shutil.copy(os.path.join(directory, HEADER_NAMES[kind]), tmp_path)
-    program = tmp_path / "hosek_eval"
-    build = subprocess.run(["gcc", "-O2", "-std=c99", "-Wall", "-Wextra", "-Werror", "-I", str(tmp_path),
-                            C_EVALUATOR, "-lm", "-o", str(program)], capture_output=True, text=True)
-    assert build.returncode == 0, build.stderr
     rng = np.random.default_rng(11)
     queries, expected = [], []
     for i in range(300):
@@ -479,5 +481,4 @@ def test_shipped_fit_is_one_table_in_three_forms_fitted_to_the_whole_training_gr
         albedo, theta, gamma = rng.uniform(), rng.uniform(0, math.pi / 2), rng.uniform(0, math.pi)
         queries.append(f"{list(CHANNELS).index(kind)} {channel} {elevation!r} {turbidity!r} {albedo!r} {theta!r} {gamma!r}")
         expected.append(tables[kind].radiance(theta, gamma, elevation, turbidity, albedo)[channel])
-    run = subprocess.run([str(program)], input="\n".join(queries) + "\n", capture_output=True, text=True, check=True)
-    np.testing.assert_allclose([float(v) for v in run.stdout.split()], expected, rtol=1e-6, atol=0.0)
+    np.testing.assert_allclose(c_evaluator_radiances(tmp_path, queries), expected, rtol=1e-6, atol=0.0)
