@@ -31,7 +31,7 @@ import numpy as np
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
 from skyref.batch.provenance import batch_skies, describe_truth, truth_provenance  # noqa: E402
-from skyref.fit.evaluate import error_summary, model_radiance  # noqa: E402
+from skyref.fit.evaluate import error_summary, relative_errors  # noqa: E402
 from skyref.fit.fitter import fit_table  # noqa: E402
 from skyref.fit.training import load_batch_dataset  # noqa: E402
 from skyref.io.atomic import atomic_write  # noqa: E402
@@ -95,9 +95,10 @@ def main():
             seconds[name] = time.process_time() - start
             print(f"{kind}, {name}: fitted in {seconds[name]:.0f} CPU s", flush=True)
         summaries = {name: error_summary(table, training)["channels"] for name, table in tables.items()}
-        used = training.weights() > 0.0
-        between = (model_radiance(tables["degraded"], training) / model_radiance(tables["as rendered"], training)
-                   - 1.0)[used]
+        # the two tables' difference relative to the truth's radiance (a table's own radiance is
+        # clamped at 0 where its form goes negative, so it cannot be the denominator)
+        between = (relative_errors(tables["degraded"], training)[0] - relative_errors(tables["as rendered"], training)[0])
+        between = between[np.isfinite(between)]
         noise = {name: data.relative_noise() for name, data in (("as rendered", training), ("degraded", noisy))}
         lines += [f"## {kind}", "",
                   f"{len(training.solar_elevation)} skies: (turbidity, albedo) " +
@@ -111,7 +112,7 @@ def main():
             a, b = summaries["as rendered"][channel], summaries["degraded"][channel]
             lines.append(f"| {channel} | {100 * a['rms']:.2f} | {100 * a['p95']:.2f} | {100 * b['rms']:.2f} | "
                          f"{100 * b['p95']:.2f} |")
-        lines += ["", f"The two tables against each other over the same directions: RMS "
+        lines += ["", f"The two tables against each other over the same directions, relative to the truth's radiance: RMS "
                   f"{100 * np.sqrt(np.mean(between ** 2)):.2f}%, p95 {100 * np.percentile(np.abs(between), 95):.2f}%, "
                   f"max {100 * np.abs(between).max():.1f}%.", ""]
     os.makedirs(os.path.join(ROOT, "results"), exist_ok=True)
