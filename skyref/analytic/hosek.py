@@ -359,9 +359,10 @@ def published_table(kind: str = "spectral") -> CoefficientTable:
 
 def skyref_fit_directory() -> str:
     """The directory of skyref's own fit of the Hosek–Wilkie model to its ground truth, shipped
-    with the package (``data/skyref_fit``): ``hosek.npz``, ``hosek.json`` and
-    ``ArHosekSkyModelData_Spectral.h`` in the published layout, what it was fitted to in its
-    ``README.md``. Read it with :func:`skyref.fit.export.read_tables`."""
+    with the package (``data/skyref_fit``): its spectral, CIE XYZ and RGB tables in ``hosek.npz``
+    and ``hosek.json``, and as ``ArHosekSkyModelData_{Spectral,CIEXYZ,RGB}.h`` in the published
+    layout; what it was fitted to in its ``README.md``. Read it with
+    :func:`skyref.fit.export.read_tables`."""
     return os.fspath(resources.files("skyref.analytic") / "data" / _SKYREF_FIT)
 
 
