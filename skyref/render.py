@@ -126,7 +126,9 @@ def _settings(scene, spp, passes, seed, polarized=None, estimator=None) -> Rende
 def rendered_pixels(scene) -> np.ndarray:
     """Flat indices (row * width + column) of the pixels the scene's ``render.region`` asks
     for: every pixel, or (``"above_horizon"``) those whose centre direction is at or above the
-    observer's horizon (view zenith <= 90 deg)."""
+    observer's horizon (view zenith <= 90 deg). A camera too large for one render
+    (:func:`check_image_size`) is refused first."""
+    check_image_size(scene, scene.render.passes)
     camera = scene.camera
     if scene.render.region == "all":
         return np.arange(camera.width * camera.height)
@@ -155,7 +157,6 @@ class _PixelRenderer:
     def __init__(self, scene, variant, geometry, wavelengths_per_path):
         check_choice("geometry", geometry, GEOMETRIES)
         scene.check_files()
-        check_image_size(scene, scene.render.passes)
         self.mi = load_mitsuba(variant)
         self.scene, self.geometry = scene, geometry
         self.integrator = build_integrator(scene, geometry, wavelengths_per_path, polarized=scene.render.polarized)
