@@ -83,14 +83,6 @@ def guide_channels(wavelengths_nm) -> list[int]:
     return sorted({int(np.argmin(np.abs(wavelengths_nm - w))) for w in GUIDE_WAVELENGTHS_NM})
 
 
-def _sun_frame_numpy(up, sun):
-    """:func:`_sun_frame` for one point, in NumPy."""
-    horizontal = sun - np.dot(sun, up) * up
-    length = np.linalg.norm(horizontal)
-    towards_sun = horizontal / length if length > 1e-6 else np.array([1.0, 0.0, 0.0])
-    return towards_sun, np.cross(up, towards_sun)
-
-
 def _sun_frame(up, sun):
     """The local horizontal unit vectors towards the sun's azimuth and 90 deg from it (any
     horizontal pair where the sun is at the local zenith)."""
@@ -123,8 +115,9 @@ class ScatteredLightGuide:
         altitudes = np.clip(self.top * (np.arange(GUIDE_LAYERS) / (GUIDE_LAYERS - 1)) ** 2, 1.0, self.top - 1.0)
         theta = (np.arange(PILOT_ZENITH_BINS) + 0.5) * (math.pi / PILOT_ZENITH_BINS)
         phi = (np.arange(PILOT_AZIMUTH_BINS) + 0.5) * (math.pi / PILOT_AZIMUTH_BINS)
-        sun = np.array([float(dr.slice(x)) for x in self.sun_direction])
-        towards_sun, across = _sun_frame_numpy(np.array([0.0, 0.0, 1.0]), sun)
+        # the table's own frame on the observer's vertical, as NumPy vectors
+        towards_sun, across = (np.array([float(dr.slice(c)) for c in v])
+                               for v in _sun_frame(mi.Vector3f(0.0, 0.0, 1.0), self.sun_direction))
         theta, phi = np.meshgrid(theta, phi, indexing="ij")
         directions = ((np.sin(theta) * np.cos(phi))[..., None] * towards_sun
                       + (np.sin(theta) * np.sin(phi))[..., None] * across + np.cos(theta)[..., None] * [0.0, 0.0, 1.0])
