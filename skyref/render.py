@@ -399,14 +399,19 @@ def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, in
                     variant: str | None = None, symmetry: bool = True, checkpoint=None) -> Sky:
     """Render ``scene`` until every rendered pixel's :func:`pixel_relative_error` is at most
     ``target_relative_error``, or it has had ``max_spp`` samples: adaptive per direction, so a
-    dark pixel costs its own samples, not the sky's.
+    dark pixel costs its own samples, not the sky's. A view traced once for n pixels
+    (``symmetry``) may take n x ``max_spp``, what those pixels would have cost traced apart: the
+    ground at a ground observer's feet, one view for the half of the sphere below the horizon,
+    ended at 0.48% with 2^20 samples on a hazy sky with a low sun (turbidity 6, sun zenith 88 deg,
+    780 nm; the LUT audit's target 0.3% asks for about 2.7 million), which cost little beside
+    its sky's 513 views.
 
     Round r uses seed ``seeds[r]`` (rounds are independent). The first gives every pixel
     ``initial_spp``; each later one gives each pixel still above the target what the
     1/sqrt(spp) law asks for (with a ROUND_MARGIN), rounded to ``passes`` x the nearest power of
     two (so a round is a few launches, one per count; rounding up instead cost 7-15% more CPU on
     the Hosek training skies, pixels ending at 0.83% for a 1% target in the median), within
-    ``max_spp``. The sky's metadata records the mean, smallest and largest samples per pixel,
+    each view's budget. The sky's metadata records the mean, smallest and largest samples per pixel,
     the share of pixels at the target and the 95th percentile of the relative error. A polarized scene (``render.polarized``)
     pools every Stokes component and aims at I's error. ``symmetry``: as in :func:`render_sky`.
     ``checkpoint``: a file (``.npz``) where the render keeps its state after every launch
@@ -425,6 +430,7 @@ def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, in
     traced, estimate_of, mirrored = traced_views(scene, pixels, symmetry)
     renderer = _PixelRenderer(scene, variant, "spherical", 0)
     views = pixels[traced]
+    budget = max_spp * np.bincount(estimate_of, minlength=views.size)    # samples each view may take
     pool = PixelPool(views.size, len(ORDER_NAMES), len(scene.wavelengths_nm), stokes_components(scene))
     progress = AdaptiveProgress(pool, _adaptive_key(scene, target_relative_error, seeds, max_spp, spp, views))
     if checkpoint is not None and not progress.resume(checkpoint):
@@ -438,8 +444,8 @@ def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, in
         error = pixel_relative_error(pool.radiance[:, 0], pool.standard_error[:, 0])
         with np.errstate(invalid="ignore", over="ignore"):
             wanted = np.ceil(ROUND_MARGIN * pool.samples * (error / target_relative_error) ** 2) - pool.samples
-        room = (max_spp - pool.samples) // passes                  # samples per pass left
-        counts = 2 ** np.round(np.log2(np.maximum(np.nan_to_num(wanted, posinf=max_spp) / passes, 1.0)))
+        room = (budget - pool.samples) // passes                   # samples per pass left
+        counts = 2 ** np.round(np.log2(np.maximum(np.nan_to_num(wanted, posinf=budget.max()) / passes, 1.0)))
         counts = np.minimum(counts, 2 ** np.floor(np.log2(np.maximum(room, 1))))
         active = (error > target_relative_error) & (room >= 1)
         return [(int(count), np.flatnonzero(active & (counts == count)),

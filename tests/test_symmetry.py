@@ -149,6 +149,18 @@ def test_an_adaptive_render_counts_samples_and_targets_per_pixel(mi):
     assert sky.metadata["pixels_at_target"] == pytest.approx(np.mean(worst <= 0.02))
 
 
+def test_a_view_traced_for_many_pixels_may_take_their_samples(mi):
+    """max_spp bounds what each pixel costs: a view traced once for n pixels may take n x max_spp.
+    Observer on the ground, 8 x 4 pixels, the sun on a column edge: the sky's 16 pixels are 8
+    mirror pairs, the ground's 16 one view at the observer's feet. With a target out of reach the
+    pairs end at 2 x 64 samples and the feet's view above that, within 16 x 64."""
+    scene = scene_with(Sun(40.0, 180.0), 8, 4, altitude_m=0.0, passes=16, estimator="delta_tracking")
+    sky = render_to_error(scene, 1e-5, seeds=[11, 12, 13, 14], max_spp=64)
+    assert sky.metadata["views_traced"] == 9
+    low, high = sky.metadata["spp_range"]
+    assert low == 2 * 64 and 2 * 64 < high <= 16 * 64, (low, high)
+
+
 def test_an_adaptive_polarized_render_turns_u_and_v_over_in_a_mirror_image(mi):
     scene = scene_with(Sun(40.0, 180.0), 8, 6, passes=16, estimator="delta_tracking", polarized=True)
     sky = render_to_error(scene, 0.05, seeds=[11, 12], max_spp=1024)

@@ -17,7 +17,7 @@
     height = 32
     spp = 64                                 # samples per pixel, or instead:
     # target_relative_error = 0.01           # render each pixel until stderr/radiance <= 1% in every channel
-    # max_spp = 16384                        #   (or this many samples: skyref.render.render_to_error)
+    # max_spp = 16384                        #   (or this many per pixel: skyref.render.render_to_error)
     passes = 16
     seed = 0
 
