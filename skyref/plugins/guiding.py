@@ -23,7 +23,9 @@ vertical plane), at the grid wavelengths nearest 440, 550 and 680 nm (their mean
   the fine cells it covers.
 
 A cell's probability is its L x solid angle plus ``GUIDE_FLOOR`` of the layer's mean, so that no
-direction is out of reach (a layer that no light reaches is uniform). Directions are drawn
+direction is out of reach (a layer that no light reaches is uniform). The table's radiance itself
+(:meth:`GuideAtVertex.radiance`, with the same floor) tells the integrator's Russian roulette what
+a path is expected to gather from a vertex on. Directions are drawn
 from the layer below or above the point's altitude (stochastically, by where it lies between
 them), a cell by its probability, uniformly in cos theta and phi within the cell, phi's sign at
 random; the density of a direction (sr^-1) is the same mixture of the two layers' cells.
@@ -105,6 +107,9 @@ class ScatteredLightGuide:
         #: The grid's channels whose mean the table holds.
         self.channels = guide_channels(wavelengths_nm)
         self.single_scattering = self._single_scattering(line, geometry, sun)
+        #: The pilot's multiply scattered radiance per fine cell and its layers' means
+        #: (:meth:`add_multiple_scattering`; None until then).
+        self.multiple = None
         self._tabulate(self.single_scattering)
 
     def pilot_directions(self) -> tuple[np.ndarray, np.ndarray]:
@@ -133,7 +138,17 @@ class ScatteredLightGuide:
         self.multiple_scattering = coarse
         fine = np.repeat(np.repeat(coarse, GUIDE_ZENITH_BINS // PILOT_ZENITH_BINS, axis=1),
                          GUIDE_AZIMUTH_BINS // PILOT_AZIMUTH_BINS, axis=2)
+        self.multiple = self._radiance_table(fine)
         self._tabulate(self.single_scattering + fine)
+
+    def _radiance_table(self, radiance) -> tuple:
+        """``radiance`` (layers, zenith bins, azimuth bins; negative values, a pilot's noise, as 0)
+        as a flat Float, and each layer's mean over the sphere (a Float of GUIDE_LAYERS)."""
+        radiance = np.maximum(radiance, 0.0)
+        cos_edges = np.cos(np.linspace(0.0, math.pi, GUIDE_ZENITH_BINS + 1))
+        cell_solid_angle = (cos_edges[:-1] - cos_edges[1:]) * self.azimuth_step     # one side
+        layer_mean = (radiance * cell_solid_angle[None, :, None]).sum(axis=(1, 2)) / (2.0 * math.pi)
+        return mi.Float(radiance.ravel().astype(np.float32)), mi.Float(layer_mean.astype(np.float32))
 
     def _tabulate(self, radiance) -> None:
         """The cells' probabilities and cumulative sums per layer from ``radiance`` (layers,
@@ -152,6 +167,8 @@ class ScatteredLightGuide:
         cumulative = np.cumsum(probability, axis=1)
         cumulative[:, -1] = 1.0
         self.probability = mi.Float(probability.ravel().astype(np.float32))
+        #: The table's radiance per cell and its layers' means (:meth:`_radiance_table`).
+        self.radiance = self._radiance_table(radiance)
         self.cumulative = mi.Float(cumulative.ravel().astype(np.float32))
         self.cos_edges = mi.Float(cos_edges.astype(np.float32))
         self.cell_solid_angle = mi.Float(cell_solid_angle.astype(np.float32))
@@ -219,14 +236,34 @@ class GuideAtVertex:
         sin_theta = dr.safe_sqrt(1.0 - cos_theta * cos_theta)
         return (sin_theta * cos_phi) * self.towards_sun + (sin_theta * sin_phi) * self.across + cos_theta * self.up
 
-    def pdf(self, direction):
-        """Density (sr^-1) with which :meth:`sample` produces the unit ``direction``."""
+    def _cell(self, direction):
+        """The cell of the unit ``direction`` in the layer below: (its index in the table, its
+        zenith bin)."""
         guide = self.guide
         theta = dr.acos(dr.clip(dr.dot(direction, self.up), -1.0, 1.0))
         zenith_bin = dr.minimum(mi.UInt32(theta * (GUIDE_ZENITH_BINS / math.pi)), GUIDE_ZENITH_BINS - 1)
         phi = dr.atan2(dr.abs(dr.dot(direction, self.across)), dr.dot(direction, self.towards_sun))
         azimuth_bin = dr.minimum(mi.UInt32(phi / guide.azimuth_step), GUIDE_AZIMUTH_BINS - 1)
-        cell = self.below * guide.cells + zenith_bin * GUIDE_AZIMUTH_BINS + azimuth_bin
-        probability = ((1.0 - self.fraction) * dr.gather(mi.Float, guide.probability, cell)
-                       + self.fraction * dr.gather(mi.Float, guide.probability, cell + guide.cells))
-        return probability / (2.0 * dr.gather(mi.Float, guide.cell_solid_angle, zenith_bin))
+        return self.below * guide.cells + zenith_bin * GUIDE_AZIMUTH_BINS + azimuth_bin, zenith_bin
+
+    def _between_layers(self, table, cell):
+        """A per-cell ``table``'s value at ``cell``, interpolated between the two layers."""
+        return ((1.0 - self.fraction) * dr.gather(mi.Float, table, cell)
+                + self.fraction * dr.gather(mi.Float, table, cell + self.guide.cells))
+
+    def pdf(self, direction):
+        """Density (sr^-1) with which :meth:`sample` produces the unit ``direction``."""
+        cell, zenith_bin = self._cell(direction)
+        return self._between_layers(self.guide.probability, cell) / (
+            2.0 * dr.gather(mi.Float, self.guide.cell_solid_angle, zenith_bin))
+
+    def radiance(self, direction, multiple_only: bool = False):
+        """The radiance the table expects to arrive from the unit ``direction`` (W m^-2 sr^-1
+        nm^-1, the mean over its channels): a cell's L1 + Lm, or Lm alone with
+        ``multiple_only`` (only once the pilot's is added), plus ``GUIDE_FLOOR`` of its layer's
+        mean, so that only a layer with no light at all reads 0. Between the two layers."""
+        table, layer_mean = self.guide.multiple if multiple_only else self.guide.radiance
+        cell, _ = self._cell(direction)
+        floor = ((1.0 - self.fraction) * dr.gather(mi.Float, layer_mean, self.below)
+                 + self.fraction * dr.gather(mi.Float, layer_mean, self.below + 1))
+        return self._between_layers(table, cell) + GUIDE_FLOOR * floor
