@@ -104,6 +104,11 @@ class ScatteredLightGuide:
         self.top = float(geometry.H)
         self.cells = GUIDE_ZENITH_BINS * GUIDE_AZIMUTH_BINS
         self.azimuth_step = math.pi / GUIDE_AZIMUTH_BINS
+        cos_edges = np.cos(np.linspace(0.0, math.pi, GUIDE_ZENITH_BINS + 1))
+        #: solid angle of one cell of each zenith bin (one side of the sun's plane), sr
+        self._cell_solid_angle_sr = (cos_edges[:-1] - cos_edges[1:]) * self.azimuth_step
+        self.cos_edges = mi.Float(cos_edges.astype(np.float32))
+        self.cell_solid_angle = mi.Float(self._cell_solid_angle_sr.astype(np.float32))
         #: The grid's channels whose mean the table holds.
         self.channels = guide_channels(wavelengths_nm)
         self.single_scattering = self._single_scattering(line, geometry, sun)
@@ -145,18 +150,13 @@ class ScatteredLightGuide:
         """``radiance`` (layers, zenith bins, azimuth bins; negative values, a pilot's noise, as 0)
         as a flat Float, and each layer's mean over the sphere (a Float of GUIDE_LAYERS)."""
         radiance = np.maximum(radiance, 0.0)
-        cos_edges = np.cos(np.linspace(0.0, math.pi, GUIDE_ZENITH_BINS + 1))
-        cell_solid_angle = (cos_edges[:-1] - cos_edges[1:]) * self.azimuth_step     # one side
-        layer_mean = (radiance * cell_solid_angle[None, :, None]).sum(axis=(1, 2)) / (2.0 * math.pi)
+        layer_mean = (radiance * self._cell_solid_angle_sr[None, :, None]).sum(axis=(1, 2)) / (2.0 * math.pi)
         return mi.Float(radiance.ravel().astype(np.float32)), mi.Float(layer_mean.astype(np.float32))
 
     def _tabulate(self, radiance) -> None:
         """The cells' probabilities and cumulative sums per layer from ``radiance`` (layers,
         zenith bins, azimuth bins)."""
-        zenith_edges = np.linspace(0.0, math.pi, GUIDE_ZENITH_BINS + 1)
-        cos_edges = np.cos(zenith_edges)
-        #: solid angle of one cell of each zenith bin (one side of the sun's plane), sr
-        cell_solid_angle = (cos_edges[:-1] - cos_edges[1:]) * self.azimuth_step
+        cell_solid_angle = self._cell_solid_angle_sr
         mass = np.maximum(radiance, 0.0) * cell_solid_angle[None, :, None]
         layer_mass = mass.sum(axis=(1, 2), keepdims=True)
         mass = mass + GUIDE_FLOOR * layer_mass * cell_solid_angle[None, :, None] / (2.0 * math.pi)
@@ -170,8 +170,6 @@ class ScatteredLightGuide:
         #: The table's radiance per cell and its layers' means (:meth:`_radiance_table`).
         self.radiance = self._radiance_table(radiance)
         self.cumulative = mi.Float(cumulative.ravel().astype(np.float32))
-        self.cos_edges = mi.Float(cos_edges.astype(np.float32))
-        self.cell_solid_angle = mi.Float(cell_solid_angle.astype(np.float32))
 
     def _single_scattering(self, line, geometry, sun):
         """L1 at the centres of the cells, (layers, zenith bins, azimuth bins), the mean over
@@ -246,15 +244,16 @@ class GuideAtVertex:
         azimuth_bin = dr.minimum(mi.UInt32(phi / guide.azimuth_step), GUIDE_AZIMUTH_BINS - 1)
         return self.below * guide.cells + zenith_bin * GUIDE_AZIMUTH_BINS + azimuth_bin, zenith_bin
 
-    def _between_layers(self, table, cell):
-        """A per-cell ``table``'s value at ``cell``, interpolated between the two layers."""
-        return ((1.0 - self.fraction) * dr.gather(mi.Float, table, cell)
-                + self.fraction * dr.gather(mi.Float, table, cell + self.guide.cells))
+    def _between_layers(self, table, index, stride):
+        """A per-layer ``table``'s value at ``index`` in the layer below (``stride`` values per
+        layer), interpolated between the two layers."""
+        return ((1.0 - self.fraction) * dr.gather(mi.Float, table, index)
+                + self.fraction * dr.gather(mi.Float, table, index + stride))
 
     def pdf(self, direction):
         """Density (sr^-1) with which :meth:`sample` produces the unit ``direction``."""
         cell, zenith_bin = self._cell(direction)
-        return self._between_layers(self.guide.probability, cell) / (
+        return self._between_layers(self.guide.probability, cell, self.guide.cells) / (
             2.0 * dr.gather(mi.Float, self.guide.cell_solid_angle, zenith_bin))
 
     def radiance(self, direction, multiple_only: bool = False):
@@ -264,6 +263,5 @@ class GuideAtVertex:
         mean, so that only a layer with no light at all reads 0. Between the two layers."""
         table, layer_mean = self.guide.multiple if multiple_only else self.guide.radiance
         cell, _ = self._cell(direction)
-        floor = ((1.0 - self.fraction) * dr.gather(mi.Float, layer_mean, self.below)
-                 + self.fraction * dr.gather(mi.Float, layer_mean, self.below + 1))
-        return self._between_layers(table, cell) + GUIDE_FLOOR * floor
+        return (self._between_layers(table, cell, self.guide.cells)
+                + GUIDE_FLOOR * self._between_layers(layer_mean, self.below, 1))
