@@ -5,7 +5,12 @@ resolution, scattering orders, sample counts and storage precision (speed agains
 Ground truth: ``grids/lut_audit.toml`` (168 skies: bruneton2017 and hillaire2020, each clear
 and at turbidity 6; observer 0, 1, 10, 50, 100 and 1000 km; sun zenith 0-96 deg; 64x32
 pixel-centre directions over the whole sphere, 17 wavelengths 380-780 nm), rendered by
-``skyref batch`` (resumable; this script runs it first and it skips finished skies).
+``skyref batch`` (resumable; this script runs it first and it skips finished skies). The
+finished skies ship in the repository, results/lut_audit/truth (a piece of the grid's output:
+EXRs, markers, grid.json; about 0.35 MB a sky), and this script imports them into the grid's
+output directory first (:func:`skyref.batch.merge.import_skies`, checked by SHA-256), so a fresh
+clone rebuilds the report without rendering them again; ``--part ship`` copies the skies
+finished since into it (:func:`skyref.batch.merge.export_skies`).
 
 Per sky the methods are compared with :func:`skyref.audit.audit.compare`: luminance errors
 (signed mean, noise-corrected RMS, p95, max) per region, CIEDE2000 on an absolute basis, each
@@ -36,6 +41,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 from skyref.audit.audit import compare  # noqa: E402
 from skyref.batch.provenance import describe_truth, truth_provenance  # noqa: E402
 from skyref.batch import load_grid, run_batch  # noqa: E402
+from skyref.batch.merge import export_skies, import_skies  # noqa: E402
 from skyref.io.atomic import atomic_path, atomic_write  # noqa: E402
 from skyref.io.exr import read_sky_exr  # noqa: E402
 from skyref.lut import METHODS, lut_method  # noqa: E402
@@ -43,6 +49,8 @@ from skyref.lut import METHODS, lut_method  # noqa: E402
 ROOT = os.path.normpath(os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 GRID = os.path.join(ROOT, "grids", "lut_audit.toml")
 RESULTS = os.path.join(ROOT, "results")
+#: The grid's finished skies, shipped in the repository (see the module docstring).
+SHIPPED_TRUTH = os.path.join(RESULTS, "lut_audit", "truth")
 
 #: Bruneton 2017 on hazy skies, two mechanisms (issue 15): (A) 50 uniform steps along 300-900 km
 #: horizon rays against a 1.2 km aerosol scale height; (B) 32 mu_s cells against the aerosol's
@@ -318,12 +326,17 @@ def _load(part):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--part", choices=("all", "grid", "sweeps", "report"), default="all")
+    parser.add_argument("--part", choices=("all", "grid", "sweeps", "report", "ship"), default="all")
     parser.add_argument("--methods", nargs="*", default=list(METHODS))
     args = parser.parse_args()
     grid = load_grid(GRID)
     log = print
     os.makedirs(os.path.join(RESULTS, "lut_audit"), exist_ok=True)
+    if args.part == "ship":
+        export_skies(grid, SHIPPED_TRUTH, log=log)
+        return
+    if os.path.isdir(SHIPPED_TRUTH):
+        import_skies(grid, SHIPPED_TRUTH, log=log, parameter="results/lut_audit/truth")
     if args.part != "report":
         # The sweeps need only their own skies of the grid; the grid part needs all of them.
         needed = (range(len(grid)) if args.part != "sweeps" else

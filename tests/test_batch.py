@@ -44,6 +44,16 @@ GOOD_OUTPUT = 'directory = "out"\nwidth = 12\nheight = 6\nspp = 8\npasses = 2'
     (GOOD_AXES, 'directory = "out"\nspp = 8\ntarget_relative_error = 0.1', "output.spp"),
     (GOOD_AXES, 'directory = "out"\nspp = 8\nformat = "hdr"', "output.format"),
     (GOOD_AXES, 'directory = "out"\nspp = 8\ncolour = 1', "output.colour"),
+    (GOOD_AXES, 'directory = "out"\nspp = 32\ntargets = [{where = {"sun.zenith_deg" = 85.0}, '
+     'target_relative_error = 0.1}]', "output.targets"),
+    (GOOD_AXES, 'directory = "out"\ntarget_relative_error = 0.01\ntargets = [{where = {"sun.azimuth_deg" = 0.0}, '
+     'target_relative_error = 0.1}]', "output.targets[0].where.sun.azimuth_deg"),
+    (GOOD_AXES, 'directory = "out"\ntarget_relative_error = 0.01\ntargets = [{where = {"sun.zenith_deg" = 80.0}, '
+     'target_relative_error = 0.1}]', "output.targets[0].where.sun.zenith_deg"),
+    (GOOD_AXES, 'directory = "out"\ntarget_relative_error = 0.01\ntargets = [{where = {"sun.zenith_deg" = 85.0}, '
+     'target_relative_error = 2.0}]', "output.targets[0].target_relative_error"),
+    (GOOD_AXES, 'directory = "out"\ntarget_relative_error = 0.01\ntargets = [{where = {"sun.zenith_deg" = 85.0}}]',
+     "output.targets[0]"),
 ])
 def test_bad_grid_is_rejected_naming_the_entry(write_grid, tmp_path, axes, output, name):
     with pytest.raises(ParameterError) as info:
@@ -376,3 +386,63 @@ def test_an_adaptive_sky_killed_mid_render_resumes_from_its_checkpoint(write_gri
     marker = json.load(open(os.path.join(killed_dir, "markers", "sky-0.json")))
     assert marker["render_time_s"] > 1e6 and len(marker["seed"]) >= 2     # resumed; more than one round
     assert marker["task_cpu_s"] > 2e6
+
+
+def test_skies_matched_by_a_target_entry_are_rendered_to_its_target(write_grid, tmp_path):
+    """``[[output.targets]]``: the skies at its axis values get its target, the others the grid's
+    (the LUT audit asks 0.3% of its skies up to sun zenith 92 deg, less of the twilight ones); a
+    grid without entries keeps the fingerprint it had before they existed."""
+    from skyref.batch import run_batch
+    from skyref.io.exr import read_sky_exr
+
+    axes = '"sun.zenith_deg" = [40.0, 60.0]'
+    output = ('directory = "out"\nwidth = 8\nheight = 4\ntarget_relative_error = 0.02\nmax_spp = 65536\n'
+              'passes = 16\ntargets = [{where = {"sun.zenith_deg" = 60}, target_relative_error = 0.08}]')
+    grid = load_grid(write_grid(tmp_path / "grid.toml", axes, output))
+    assert [grid.target_relative_error(spec.coordinates) for spec in grid.skies()] == [0.02, 0.08]
+    run_batch(grid, workers=1, progress=False, log=lambda *_: None)
+    skies = [read_sky_exr(str(tmp_path / "out" / "skies" / f"sky-{i}.exr")) for i in (0, 1)]
+    assert [sky.metadata["target_relative_error"] for sky in skies] == [0.02, 0.08]
+    assert skies[0].metadata["spp"] > 4 * skies[1].metadata["spp"]         # (0.08 / 0.02)^2 = 16 x the samples
+
+    plain = load_grid(write_grid(tmp_path / "plain.toml", axes, output.split("\ntargets")[0]))
+    assert '"targets"' not in plain.fingerprint() and '"targets"' in grid.fingerprint()
+
+
+def test_exported_skies_import_into_a_fresh_directory_as_rendered(write_grid, tmp_path):
+    """``export_skies``: the skies finished in a grid's output become a piece (EXRs, markers,
+    grid.json; how the LUT audit's ground truth ships) that a fresh directory imports byte for
+    byte; exporting again copies nothing; a sky whose EXR does not match its marker stays out;
+    a piece of another grid is refused, nothing written."""
+    from skyref.batch import run_batch
+    from skyref.batch.merge import export_skies, import_skies
+    from skyref.batch.store import sha256_of
+
+    axes = '"sun.zenith_deg" = [20.0, 50.0, 80.0]'
+    output = 'width = 8\nheight = 4\nspp = 8\npasses = 2'
+    quiet = dict(log=lambda *_: None)
+    rendered = load_grid(write_grid(tmp_path / "rendered.toml", axes, 'directory = "rendered"\n' + output))
+    fresh = load_grid(write_grid(tmp_path / "fresh.toml", axes, 'directory = "fresh"\n' + output))
+    run_batch(rendered, workers=1, progress=False, **quiet)
+    with open(tmp_path / "rendered" / "skies" / "sky-2.exr", "r+b") as f:   # same size, other bytes
+        f.seek(-1, os.SEEK_END)
+        last = f.read(1)
+        f.seek(-1, os.SEEK_END)
+        f.write(bytes([last[0] ^ 1]))
+
+    piece = str(tmp_path / "piece")
+    assert export_skies(rendered, piece, **quiet) == ["sky-0", "sky-1"]
+    assert sorted(os.listdir(piece)) == ["grid.json", "markers", "skies"]
+    assert export_skies(rendered, piece, **quiet) == []
+    assert import_skies(fresh, piece, **quiet)["imported"] == ["sky-0", "sky-1"]
+    for i in (0, 1):
+        assert sha256_of(tmp_path / "fresh" / "skies" / f"sky-{i}.exr") == \
+            sha256_of(tmp_path / "rendered" / "skies" / f"sky-{i}.exr")
+
+    other = load_grid(write_grid(tmp_path / "other.toml", '"sun.zenith_deg" = [20.0]',
+                                 'directory = "other"\n' + output))
+    run_batch(other, workers=1, progress=False, **quiet)
+    before = sorted(os.listdir(os.path.join(piece, "skies")))
+    with pytest.raises(ParameterError, match="destination"):
+        export_skies(other, piece, **quiet)
+    assert sorted(os.listdir(os.path.join(piece, "skies"))) == before

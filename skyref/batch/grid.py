@@ -21,6 +21,10 @@
     passes = 16
     seed = 0
 
+    [[output.targets]]                       # optional: another target for the skies at these axis values
+    where = { "sun.zenith_deg" = 80 }        #   (the first entry that matches wins)
+    target_relative_error = 0.03
+
 An axis is a path into the scene's TOML tables (``sun.zenith_deg``, ``observer.altitude_m``,
 ``atmosphere.preset``, ``atmosphere.turbidity``, ``atmosphere.ground_albedo``,
 ``atmosphere.constituents.<name>.<field>``, ...); each value replaces that entry of the base
@@ -88,6 +92,9 @@ class OutputSettings:
     max_spp: int = 16384
     passes: int = 16
     seed: int = 0
+    #: ``[{"where": {axis path: value, ...}, "target_relative_error": x}, ...]``: skies at those
+    #: axis values get target x instead (:meth:`Grid.target_relative_error`)
+    targets: tuple = ()
 
     def __post_init__(self):
         check_choice("output.format", self.format, FORMATS)
@@ -106,6 +113,17 @@ class OutputSettings:
         check_int("output.seed", self.seed, 0, 1 << 16)
         if self.spp is not None and self.spp < self.passes:
             raise ParameterError("output.spp", self.spp, f">= output.passes ({self.passes})", "too few samples")
+        if self.targets and self.target_relative_error is None:
+            raise ParameterError("output.targets", self.targets, "only with output.target_relative_error",
+                                 "a fixed spp has no target to replace")
+        for i, entry in enumerate(self.targets):
+            name = f"output.targets[{i}]"
+            if not isinstance(entry, dict) or set(entry) != {"where", "target_relative_error"}:
+                raise ParameterError(name, entry, "a table with where = {axis = value, ...} and "
+                                     "target_relative_error", "other entries or missing ones")
+            if not isinstance(entry["where"], dict) or not entry["where"]:
+                raise ParameterError(f"{name}.where", entry["where"], "a non-empty table of axis values", "empty")
+            check_number(f"{name}.target_relative_error", entry["target_relative_error"], 1e-4, 1.0)
 
 
 def dimension_name(path: str) -> str:
@@ -113,6 +131,12 @@ def dimension_name(path: str) -> str:
     letter, digit or underscore becomes an underscore (a valid CF and netCDF name; paths start
     with a scene table's name, so with a letter)."""
     return re.sub(r"[^A-Za-z0-9_]", "_", path)
+
+
+def _key(value) -> str:
+    """An axis value as JSON, to compare values that may be tables (and 80 with 80.0)."""
+    return json.dumps(float(value) if isinstance(value, int) and not isinstance(value, bool) else value,
+                      sort_keys=True)
 
 
 def _set_path(data: dict, path: str, value) -> dict:
@@ -164,13 +188,21 @@ class Grid:
                                      "too many: split the sweep into several grids")
             if any(isinstance(v, list) for v in values):
                 raise ParameterError(f"axes.{path}", values, "a list of numbers, strings or tables", "nested lists")
-            if len({json.dumps(v, sort_keys=True) for v in values}) != len(values):
+            if len({_key(v) for v in values}) != len(values):
                 raise ParameterError(f"axes.{path}", values, "distinct values", "repeated value")
         names = [dimension_name(path) for path in self.axes]
         for path, name in zip(self.axes, names):
             if names.count(name) > 1:
                 raise ParameterError(f"axes.{path}", name, "axis paths whose dataset dimension names (dots "
                                      "and other punctuation as underscores) differ", "two axes share that name")
+        for i, entry in enumerate(self.output.targets):
+            for path, value in entry["where"].items():
+                if path not in self.axes:
+                    raise ParameterError(f"output.targets[{i}].where.{path}", value, "one of the axes "
+                                         + ", ".join(self.axes), "not an axis")
+                if _key(value) not in {_key(v) for v in self.axes[path]}:
+                    raise ParameterError(f"output.targets[{i}].where.{path}", value, "one of that axis' values "
+                                         + ", ".join(map(str, self.axes[path])), "not among them")
         if len(self) > MAX_SKIES:
             raise ParameterError("axes", " x ".join(f"{len(v):,}" for v in self.axes.values()) + f" = {len(self):,} skies",
                                  f"at most {MAX_SKIES:,} skies", "too many: split the sweep into several grids "
@@ -204,6 +236,15 @@ class Grid:
         if any(isinstance(v, dict) for v in values):
             return np.array([json.dumps(v, sort_keys=True) for v in values])
         return np.asarray(values)
+
+    def target_relative_error(self, coordinates: dict) -> float | None:
+        """The relative standard error the sky at ``coordinates`` is rendered to: that of the
+        first ``output.targets`` entry whose axis values it has, else ``output.target_relative_error``
+        (None for a fixed spp)."""
+        for entry in self.output.targets:
+            if all(_key(coordinates[path]) == _key(value) for path, value in entry["where"].items()):
+                return entry["target_relative_error"]
+        return self.output.target_relative_error
 
     def sky_id(self, index: int) -> str:
         return f"sky-{index:0{len(str(len(self) - 1))}d}"
@@ -270,9 +311,9 @@ class Grid:
 
     def fingerprint(self) -> str:
         """JSON that identifies the grid's content (not its file location)."""
-        return json.dumps({"base": self.base, "axes": self.axes,
-                           "output": {k: v for k, v in dataclasses.asdict(self.output).items() if k != "directory"}},
-                          sort_keys=True)
+        output = {k: v for k, v in dataclasses.asdict(self.output).items()
+                  if k != "directory" and not (k == "targets" and not v)}   # a grid's before targets existed
+        return json.dumps({"base": self.base, "axes": self.axes, "output": output}, sort_keys=True)
 
 
 def load_grid(path) -> Grid:
@@ -310,4 +351,7 @@ def load_grid(path) -> Grid:
         raise ParameterError("output.directory", None, "a directory for the skies", "missing")
     output["directory"] = os.path.normpath(os.path.join(here, str(output["directory"])))
     check_fields("output", output, OutputSettings)
+    if not isinstance(output.get("targets", []), list):
+        raise ParameterError("output.targets", output["targets"], "an array of tables [[output.targets]]", "not one")
+    output["targets"] = tuple(output.get("targets", ()))
     return Grid(base=scene, axes=dict(data.get("axes", {})), output=OutputSettings(**output), source=path)

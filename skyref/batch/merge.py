@@ -8,7 +8,9 @@ takes every sky finished there and not here: it checks the piece's grid is this 
 writes the sky into this directory's dataset from the EXR (the dataset's values of a sky are a
 function of its EXR: :meth:`~skyref.batch.store.BatchStore.write_sky`), and writes its marker
 last, with ``imported_from`` added, so that an import killed at any moment resumes like a run.
-Skies already finished here are kept as they are.
+Skies already finished here are kept as they are. :func:`export_skies` makes such a piece of
+the skies finished here: their EXRs, markers and ``grid.json``, without the dataset (the
+ground truth of the LUT audit ships in the repository that way, results/lut_audit/truth).
 """
 
 from __future__ import annotations
@@ -19,10 +21,10 @@ import shutil
 
 from skyref.batch.store import BatchStore
 from skyref.errors import ParameterError
-from skyref.io.atomic import atomic_path
+from skyref.io.atomic import atomic_path, atomic_write
 from skyref.io.exr import read_sky_exr
 
-__all__ = ["import_skies"]
+__all__ = ["import_skies", "export_skies"]
 
 
 def import_skies(grid, source, log=print, parameter: str = "source") -> dict:
@@ -75,3 +77,37 @@ def _import(theirs: BatchStore, ours: BatchStore, index: int, sky_id: str) -> No
     with open(theirs.marker_path(sky_id)) as f:
         marker = json.load(f)
     ours.write_marker(sky_id, dict(marker, imported_from=theirs.directory))
+
+
+def export_skies(grid, destination, log=print) -> list[str]:
+    """Copy the skies finished in ``grid``'s output directory that ``destination`` lacks into it,
+    each EXR checked against its marker's SHA-256 and copied before its marker (atomically), with
+    the grid's ``grid.json``: a piece :func:`import_skies` takes. Returns the ids copied. Raises a
+    ParameterError naming ``destination`` before anything is written if it holds another grid's
+    skies."""
+    ours = BatchStore(grid)
+    piece = BatchStore(grid, directory=destination)
+    stored = piece.stored_fingerprint()
+    if stored is not None and stored != grid.fingerprint():
+        raise ParameterError("destination", destination, "an empty directory or a piece of this grid",
+                             "its grid.json is another grid's")
+    if piece.directory == ours.directory:
+        raise ParameterError("destination", destination, "another directory than the grid's own output",
+                             "it is the same")
+    for sub in ("skies", "markers"):
+        os.makedirs(os.path.join(piece.directory, sub), exist_ok=True)
+    if stored is None:
+        with atomic_write(piece.fingerprint_path) as f:
+            f.write(grid.fingerprint())
+    copied = []
+    for index in range(len(grid)):
+        sky_id = grid.sky_id(index)
+        if piece.is_finished(sky_id) or not ours.is_finished(sky_id, verify=True):
+            continue
+        with atomic_path(piece.exr_path(sky_id)) as tmp:
+            shutil.copyfile(ours.exr_path(sky_id), tmp)
+        with atomic_path(piece.marker_path(sky_id)) as tmp:
+            shutil.copyfile(ours.marker_path(sky_id), tmp)
+        copied.append(sky_id)
+    log(f"skyref batch: copied {len(copied)} finished skies to {piece.directory}")
+    return copied

@@ -141,7 +141,7 @@ def _run(grid, store, first_scene, client, threads, variant, verify, progress, l
             bar = tqdm(total=len(indices), initial=done_before, unit="sky", desc="skyref batch", smoothing=0.1)
             if grid.output.target_relative_error is not None:
                 watcher = threading.Thread(target=_note_skies_in_flight, daemon=True,
-                                           args=(store, in_flight, grid.output.target_relative_error, bar, stop))
+                                           args=(store, in_flight, bar, stop))
                 watcher.start()
         try:
             window = 2 * max(1, len(client.scheduler_info(n_workers=-1)["workers"]))
@@ -185,7 +185,7 @@ def _run(grid, store, first_scene, client, threads, variant, verify, progress, l
     return manifest
 
 
-def _note_skies_in_flight(store, in_flight: dict, target_relative_error: float, bar, stop) -> None:
+def _note_skies_in_flight(store, in_flight: dict, bar, stop) -> None:
     """Until ``stop`` is set, say on ``bar`` how far each sky in flight is, from its checkpoint
     (:meth:`skyref.render.AdaptiveProgress.describe`): one sky of a hard grid can take hours."""
     while not stop.wait(PARTIAL_LOOK_S):
@@ -194,5 +194,6 @@ def _note_skies_in_flight(store, in_flight: dict, target_relative_error: float, 
         except RuntimeError:            # changed while it was read: look again next time
             continue
         notes = [f"{spec.sky_id}: {note}" for spec in specs
-                 if (note := AdaptiveProgress.describe(store.checkpoint_path(spec.sky_id), target_relative_error))]
+                 if (note := AdaptiveProgress.describe(store.checkpoint_path(spec.sky_id),
+                                                       store.grid.target_relative_error(spec.coordinates)))]
         bar.set_postfix_str("; ".join(notes))

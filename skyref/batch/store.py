@@ -168,9 +168,9 @@ class BatchStore:
         ``partial``, sky id -> how far each sky rendered part-way is, from its checkpoint
         (:meth:`skyref.render.AdaptiveProgress.describe`)."""
         finished, cpu_s, partial = 0, 0.0, {}
-        target = self.grid.output.target_relative_error
         for index in indices:
             sky_id = self.grid.sky_id(index)
+            target = self.grid.target_relative_error(self.grid.sky(index).coordinates)
             if self.is_finished(sky_id):
                 with open(self.marker_path(sky_id)) as f:
                     cpu_s += json.load(f).get("task_cpu_s", 0.0)

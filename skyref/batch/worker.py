@@ -39,8 +39,8 @@ def render_and_store(task: dict) -> dict:
     else:
         seeds = [grid.seed(spec.index, r) for r in range(task["max_rounds"])]
         checkpoint = store.checkpoint_path(spec.sky_id)
-        sky = render_to_error(scene, output.target_relative_error, seeds, output.max_spp, variant=task["variant"],
-                              checkpoint=checkpoint)
+        sky = render_to_error(scene, grid.target_relative_error(spec.coordinates), seeds, output.max_spp,
+                              variant=task["variant"], checkpoint=checkpoint)
     sky.metadata["batch"] = {"sky_id": spec.sky_id, "index": spec.index, "coordinates": spec.coordinates}
 
     exr_path = store.exr_path(spec.sky_id)
