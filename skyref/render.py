@@ -36,12 +36,12 @@ from skyref.projection import camera_to_world, pixel_directions
 from skyref.scene import RenderSettings
 from skyref.sky import ORDER_NAMES, STOKES, Sky
 from skyref.symmetry import copy_estimates, view_groups
-from skyref.validation import check_choice, check_number, check_output_file
+from skyref.validation import check_choice, check_int, check_number, check_output_file
 
 __all__ = ["MAX_IMAGE_VALUES", "GEOMETRIES", "sensor_dict", "build_integrator", "stokes_components",
            "check_image_size", "render_sky",
            "rendered_pixels", "relative_error_percentile", "pixel_relative_error", "PixelPool",
-           "AdaptiveProgress", "render_to_error", "ROUND_MARGIN", "traced_views"]
+           "AdaptiveProgress", "render_to_error", "ROUND_MARGIN", "traced_views", "render_views"]
 
 #: Most values (passes x pixels x scattering orders x Stokes components (polarized: 4) x
 #: wavelengths) one render accumulates: each takes ~12 bytes across the device buffer and its host
@@ -268,6 +268,19 @@ def render_sky(scene, spp: int | None = None, passes: int | None = None, seed: i
     metadata = renderer.metadata(spp_total, settings.passes, settings.seed, elapsed, traced.size * spp_total,
                                  traced.size)
     return _sky(scene, pixels, orders.sum(axis=1), standard_error, orders, metadata)
+
+
+def render_views(scene, pixels, spp: int, seed: int, variant: str | None = None) -> tuple:
+    """The radiance (M, N) and its standard error (M, N) of the chosen ``pixels`` (flat indices,
+    row * width + column) of ``scene``'s camera, ``spp`` samples each in ``scene.render.passes``
+    passes with ``seed``: a few directions checked at a fixed sample count, apart from the
+    render of the rest of the image."""
+    pixels = np.asarray(pixels, dtype=np.int64)
+    check_int("spp", spp, scene.render.passes, 1 << 30)
+    renderer = _PixelRenderer(scene, variant, "spherical", 0)
+    orders, standard_error = renderer.statistics(renderer.passes(pixels, spp // scene.render.passes,
+                                                                 scene.render.passes, seed))
+    return orders.sum(axis=1)[:, 0], standard_error[:, 0]
 
 
 def relative_error_percentile(sky: Sky, percentile: float = 95.0) -> float:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from skyref.errors import ParameterError
-from skyref.render import PixelPool, pixel_relative_error, render_sky, render_to_error
+from skyref.render import PixelPool, pixel_relative_error, render_sky, render_to_error, render_views
 from skyref.scene import ESTIMATORS, Camera, RenderSettings, Scene, Sun
 
 
@@ -146,3 +146,20 @@ def test_render_to_error_refuses_a_bad_checkpoint_before_any_work(tmp_path, chec
     scene = Scene(camera=Camera(width=4, height=2), wavelengths="rgb")
     with pytest.raises(ParameterError, match=rf"checkpoint = .*{reason}"):
         render_to_error(scene, 0.01, seeds=[1], max_spp=64, checkpoint=tmp_path / checkpoint)
+
+
+def test_render_views_renders_the_pixels_it_is_given(mi):
+    """``render_views``: chosen pixels at a fixed count (benchmarks/truth_check.py checks a
+    batch's views with it) agree with a render of the whole image at those pixels, value by
+    value, and not with the image's other pixels (rows 0 and 3, columns 3, 5 and 0: a row or
+    column mixed up would be off by many standard errors)."""
+    scene = Scene(sun=Sun(zenith_deg=40.0), camera=Camera(width=8, height=6), wavelengths="rgb",
+                  render=RenderSettings(passes=16, pixel_sampling="centre"))
+    pixels = np.array([3, 29, 24])
+    radiance, error = render_views(scene, pixels, 4096, seed=7)
+    reference = render_sky(scene, spp=4096, seed=8, symmetry=False)
+    flat, flat_error = reference.radiance.reshape(-1, 3), reference.standard_error.reshape(-1, 3)
+    z = (radiance - flat[pixels]) / np.hypot(error, flat_error[pixels])
+    assert radiance.shape == error.shape == (3, 3) and np.all(np.abs(z) < 4.5), z
+    swapped = (radiance - flat[[24, 3, 29]]) / np.hypot(error, flat_error[[24, 3, 29]])
+    assert np.mean(swapped ** 2) > 25, swapped
