@@ -446,3 +446,21 @@ def test_exported_skies_import_into_a_fresh_directory_as_rendered(write_grid, tm
     with pytest.raises(ParameterError, match="destination"):
         export_skies(other, piece, **quiet)
     assert sorted(os.listdir(os.path.join(piece, "skies"))) == before
+
+
+def test_the_local_cluster_keeps_a_worker_it_has_not_heard_from():
+    """A batch paused for longer than dask's worker time-to-live (5 minutes; SIGSTOP, a suspended
+    laptop) must not lose its workers on resuming: each sky queued on a dropped worker counts it as
+    a death, and a sky fails after three (two LUT-audit skies did, 2026-12-05). The local
+    cluster's scheduler keeps no time-to-live; a worker process that dies is seen by its nanny."""
+    import dask
+    import distributed  # noqa: F401  (loads dask's distributed settings)
+
+    from skyref.batch.run import local_cluster
+
+    assert dask.config.get("distributed.scheduler.worker-ttl") is not None   # dask's default: 5 minutes
+    cluster, _ = local_cluster(1)
+    try:
+        assert cluster.scheduler.worker_ttl is None
+    finally:
+        cluster.close()

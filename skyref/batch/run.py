@@ -58,9 +58,16 @@ def local_cluster(workers: int | None):
     require("batch")
     from dask.distributed import LocalCluster  # lazy: dask takes ~1 s to import (see module docstring)
 
+    import dask
+
     workers = check_workers(workers)
-    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
-                           silence_logs=logging.ERROR)
+    # No worker time-to-live: the scheduler would drop a worker not heard from for 5 minutes, and
+    # a batch paused that long (SIGSTOP, a suspended laptop) lost its workers on resuming, each
+    # sky queued on one counted as killed by it (a sky fails after 3): on 2026-12-05 a 17-minute
+    # pause failed two LUT-audit skies. A local worker that dies is seen by its nanny all the same.
+    with dask.config.set({"distributed.scheduler.worker-ttl": None}):
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                               silence_logs=logging.ERROR)
     return cluster, max(1, (os.cpu_count() or 1) // workers)
 
 
