@@ -64,8 +64,9 @@ def chosen_views(scene, truth, count: int, rng) -> np.ndarray:
     traced, _, _ = traced_views(scene, pixels)
     views = pixels[traced]
     mean = truth.radiance.reshape(-1, truth.radiance.shape[-1])[views].mean(axis=1)
-    lit = views[np.isfinite(mean) & (mean > 0)]
-    darkest = lit[np.argsort(mean[np.isfinite(mean) & (mean > 0)])[:count]]
+    is_lit = np.isfinite(mean) & (mean > 0)
+    lit = views[is_lit]
+    darkest = lit[np.argsort(mean[is_lit])[:count]]
     others = rng.choice(np.setdiff1d(lit, darkest), size=min(count, lit.size - darkest.size), replace=False)
     return np.concatenate([darkest, np.sort(others)])
 

@@ -170,12 +170,11 @@ class BatchStore:
         finished, cpu_s, partial = 0, 0.0, {}
         for index in indices:
             sky_id = self.grid.sky_id(index)
-            target = self.grid.target_relative_error(self.grid.sky(index).coordinates)
             if self.is_finished(sky_id):
                 with open(self.marker_path(sky_id)) as f:
                     cpu_s += json.load(f).get("task_cpu_s", 0.0)
                 finished += 1
-            elif target is not None:
+            elif (target := self.grid.target_relative_error(self.grid.sky(index).coordinates)) is not None:
                 note = AdaptiveProgress.describe(self.checkpoint_path(sky_id), target)
                 if note is not None:
                     partial[sky_id] = note
