@@ -7,10 +7,16 @@ Where there is none it sets :data:`NO_LIBRARY` instead, so that Dr.Jit's LLVM ba
 rather than loading a library that crashes it: the CUDA variants still work (a GPU machine needs
 no libLLVM), and :func:`skyref.plugins.load_mitsuba` says what to install when an LLVM variant
 is asked for.
+
+Once Dr.Jit is loaded, :func:`allow_vector_gathers` lets LLVM emit AVX2 gather instructions on
+CPUs whose LLVM tuning scalarizes them (AMD Zen): a scalarized gather splits the kernel into a
+basic block per lane, and compiling the line integral's kernels then took 4x longer (measured in
+``benchmarks/kernel_compile.py``).
 """
 
 from __future__ import annotations
 
+import ctypes
 import glob
 import os
 import re
@@ -19,6 +25,9 @@ import sys
 
 #: Major versions of libLLVM that crash Dr.Jit 1.5 on these machines (see docs/design.md).
 BROKEN_MAJOR_VERSIONS = frozenset({15, 16})
+#: Set to 0 to keep LLVM's own choice of gather instructions (:func:`allow_vector_gathers`).
+FAST_GATHER_VARIABLE = "SKYREF_LLVM_FAST_GATHER"
+
 #: Oldest major version known to work.
 MINIMUM_MAJOR_VERSION = 17
 
@@ -94,6 +103,44 @@ def configure_libllvm() -> str:
     path = working_library() or NO_LIBRARY
     os.environ["DRJIT_LIBLLVM_PATH"] = path
     return path
+
+
+def allow_vector_gathers() -> bool:
+    """Let Dr.Jit's LLVM backend compile gathers (table lookups) to AVX2 gather instructions;
+    return whether the target was changed.
+
+    LLVM emits them only on CPUs it tunes as having fast gathers (Intel since Skylake, any
+    AVX-512 CPU); elsewhere (AMD Zen) it turns each vector gather into one branch per lane. The
+    line integral's kernels hold thousands of lookups, and splitting them into blocks cost most of
+    their compile time: the hard-case test's clear-sky kernels compiled in 362 s as LLVM tuned
+    them, 87 s with gathers, and ran no slower (same radiance to the last bit; see
+    ``benchmarks/kernel_compile.py``). Adds ``+fast-gather`` to the target's features where AVX2
+    is present and neither ``+fast-gather`` nor ``+prefer-no-gather`` (a security mitigation) is;
+    a no-op otherwise, on a Dr.Jit without its ``jit_llvm_set_target``, or with
+    ``SKYREF_LLVM_FAST_GATHER=0``. Applies to every kernel compiled afterwards in this process;
+    the kernel cache tells the two apart (the features are part of each kernel's IR)."""
+    if os.environ.get(FAST_GATHER_VARIABLE, "1") == "0":
+        return False
+    import drjit as dr
+
+    if not dr.has_backend(dr.JitBackend.LLVM):
+        return False
+    try:
+        core = ctypes.CDLL(os.path.join(os.path.dirname(dr.__file__), "libdrjit-core.so"))
+        target_cpu = core._Z19jit_llvm_target_cpuv
+        target_features = core._Z24jit_llvm_target_featuresv
+        vector_width = core._Z21jit_llvm_vector_widthv
+        set_target = core._Z19jit_llvm_set_targetPKcS0_j
+    except (OSError, AttributeError):
+        return False
+    target_cpu.restype = target_features.restype = ctypes.c_char_p
+    vector_width.restype = ctypes.c_uint32
+    features = (target_features() or b"").split(b",")
+    if b"+avx2" not in features or b"+fast-gather" in features or b"+prefer-no-gather" in features:
+        return False
+    set_target.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_uint32]
+    set_target(target_cpu(), b",".join(features + [b"+fast-gather"]), vector_width())
+    return True
 
 
 if __name__ == "__main__":  # `python -m skyref._llvm`: exit 0 when a working libLLVM is present

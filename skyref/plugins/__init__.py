@@ -39,7 +39,7 @@ import importlib.util
 import os
 import sys
 
-from skyref._llvm import BROKEN_MAJOR_VERSIONS, INSTALL_HINT, configure_libllvm
+from skyref._llvm import BROKEN_MAJOR_VERSIONS, INSTALL_HINT, allow_vector_gathers, configure_libllvm
 from skyref.errors import SkyrefSetupError
 from skyref.validation import check_choice
 
@@ -90,6 +90,7 @@ def register():
         return
     if variant.startswith("llvm"):
         _check_loaded_libllvm()
+        allow_vector_gathers()
     from skyref.plugins import integrator, medium, phase, sensors, sky_emitter
 
     sensors.register_sensors()
