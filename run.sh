@@ -51,7 +51,9 @@ case "${1:-}" in
     test)
         setup
         shift
-        exec "$VENV/bin/python" -m pytest "$@"
+        # Two worker processes, a test file each at a time: a new kernel configuration compiles
+        # on one core for minutes (docs/design.md), so two files compile side by side.
+        exec "$VENV/bin/python" -m pytest -n 2 --dist loadfile "$@"
         ;;
     *) echo "usage: bash run.sh demo|test|setup" >&2; exit 2 ;;
 esac

@@ -174,9 +174,11 @@ def test_forward_derivative_matches_finite_difference_slow(mi, integ, name):
 LINE_INTEGRAL_SPP, LINE_INTEGRAL_SEEDS = 256, 32
 DELTA_TRACKING_SPP, DELTA_TRACKING_SEEDS = 32768, 32
 
-#: Checked in CI (an absorber, a phase function, the ground); the slow tier checks every parameter
-#: (about 9 minutes: each parameter's derivative compiles its own line-integral kernels).
-LINE_INTEGRAL_CI_PARAMETERS = ("ozone.column_du", "aerosol.g", "ground_albedo")
+#: Checked in CI (the phase function's, the best-determined); the slow tier checks every other
+#: parameter. Each parameter's derivative compiles its own line-integral kernels: about 5 minutes
+#: of CPU each on the AMD machines of 2026-12 with a cold kernel cache, so three of them made a
+#: sixth of the CI run.
+LINE_INTEGRAL_CI_PARAMETERS = ("aerosol.g",)
 
 
 @pytest.fixture(scope="module")

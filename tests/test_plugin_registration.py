@@ -127,6 +127,49 @@ def test_no_libllvm_refuses_llvm_variants_only():
     assert "'llvm_ad_rgb'" in message and "apt-get install libllvm19" in message
 
 
+#: Prints LLVM's target features after ``load_mitsuba`` and saves the radiance of 8 views of a
+#: clear sky by the baseline estimator to the file PROBE_OUT names.
+GATHER_PROBE = """
+    import ctypes, os
+    import numpy as np
+    from skyref.plugins import load_mitsuba
+    mi = load_mitsuba("llvm_ad_rgb")
+    import drjit as dr
+    from skyref.atmosphere import bruneton2017
+    from skyref.render import build_integrator
+    from skyref.scene import Scene, Sun
+    core = ctypes.CDLL(os.path.join(os.path.dirname(dr.__file__), "libdrjit-core.so"))
+    features = core._Z24jit_llvm_target_featuresv
+    features.restype = ctypes.c_char_p
+    print(features().decode())
+    integrator = build_integrator(Scene(atmosphere=bruneton2017(), sun=Sun(60.0, 180.0), wavelengths="rgb"),
+                                  estimator="delta_tracking")
+    zenith = np.radians(np.linspace(0.0, 89.0, 8))
+    views = np.stack([np.sin(zenith), np.zeros(8), np.cos(zenith)], axis=1)
+    np.save(os.environ["PROBE_OUT"], integrator.render_directions(views, seed=3, spp=256).numpy())
+"""
+
+
+def test_vector_gathers_are_allowed_and_change_no_value(tmp_path):
+    """load_mitsuba adds +fast-gather to LLVM's target where the CPU has AVX2 and LLVM's tuning
+    does not (``skyref._llvm.allow_vector_gathers``), not with SKYREF_LLVM_FAST_GATHER=0; either
+    way a render gives the same radiance to the last bit (each in an empty kernel cache)."""
+    results = {}
+    for setting in ("0", "1"):
+        out = tmp_path / f"radiance{setting}.npy"
+        result = run(GATHER_PROBE, SKYREF_LLVM_FAST_GATHER=setting, DRJIT_CACHE_DIR=str(tmp_path / setting),
+                     PROBE_OUT=str(out))
+        assert result.returncode == 0, result.stderr
+        results[setting] = (result.stdout.split()[0].split(","), np.load(out))
+    tuned, allowed = results["0"][0], results["1"][0]
+    if "+avx2" in tuned and "+fast-gather" not in tuned and "+prefer-no-gather" not in tuned:
+        assert allowed == tuned + ["+fast-gather"]
+    else:
+        assert allowed == tuned
+    assert np.all(results["0"][1][:, 1:].sum(axis=1) > 0.0)
+    np.testing.assert_array_equal(results["0"][1], results["1"][1])
+
+
 # --- shapes in a scene rendered with mi.render ------------------------------------------------
 
 def _view_through(mi, shape=None):
