@@ -10,8 +10,8 @@ is asked for.
 
 Once Dr.Jit is loaded, :func:`allow_vector_gathers` lets LLVM emit AVX2 gather instructions on
 CPUs whose LLVM tuning scalarizes them (AMD Zen): a scalarized gather splits the kernel into a
-basic block per lane, and compiling the line integral's kernels then took 4x longer (measured in
-``benchmarks/kernel_compile.py``).
+basic block per lane, and compiling the line integral's kernels then took 4x longer
+(docs/design.md, "libLLVM").
 """
 
 from __future__ import annotations
@@ -113,12 +113,13 @@ def allow_vector_gathers() -> bool:
     AVX-512 CPU); elsewhere (AMD Zen) it turns each vector gather into one branch per lane. The
     line integral's kernels hold thousands of lookups, and splitting them into blocks cost most of
     their compile time: the hard-case test's clear-sky kernels compiled in 362 s as LLVM tuned
-    them, 87 s with gathers, and ran no slower (same radiance to the last bit; see
-    ``benchmarks/kernel_compile.py``). Adds ``+fast-gather`` to the target's features where AVX2
-    is present and neither ``+fast-gather`` nor ``+prefer-no-gather`` (a security mitigation) is;
-    a no-op otherwise, on a Dr.Jit without its ``jit_llvm_set_target``, or with
-    ``SKYREF_LLVM_FAST_GATHER=0``. Applies to every kernel compiled afterwards in this process;
-    the kernel cache tells the two apart (the features are part of each kernel's IR)."""
+    them, 87 s with gathers, and ran no slower (same radiance to the last bit;
+    ``benchmarks/kernel_compile.py`` measures it).
+
+    Adds ``+fast-gather`` to the target's features where AVX2 is present and neither
+    ``+fast-gather`` nor ``+prefer-no-gather`` (a security mitigation) is; a no-op otherwise, on a
+    Dr.Jit without its ``jit_llvm_set_target``, or with ``SKYREF_LLVM_FAST_GATHER=0``. Applies to
+    every kernel compiled afterwards in this process."""
     if os.environ.get(FAST_GATHER_VARIABLE, "1") == "0":
         return False
     import drjit as dr
