@@ -43,17 +43,14 @@ CONFIGS = {
 #: Run in a fresh interpreter: renders a 64x32 sky at pixel centres twice (seeds 1 and 2) and
 #: prints the CPU seconds of each, LLVM's target features and the first render's radiance (.npy).
 MEASURE = """
-import ctypes, json, os, sys, time
+import json, sys, time
 import numpy as np
 import skyref.atmosphere as atm
+from skyref._llvm import llvm_target_features
 from skyref.plugins import load_mitsuba
 from skyref.render import render_sky
 from skyref.scene import Camera, Observer, RenderSettings, Scene, Sun
 load_mitsuba("llvm_ad_rgb")
-import drjit as dr
-core = ctypes.CDLL(os.path.join(os.path.dirname(dr.__file__), "libdrjit-core.so"))
-features = core._Z24jit_llvm_target_featuresv
-features.restype = ctypes.c_char_p
 job = json.loads(sys.argv[1])
 atmosphere = atm.bruneton2017() if job["turbidity"] is None else atm.from_turbidity(job["turbidity"])
 scene = Scene(atmosphere=atmosphere, sun=Sun(job["sun_zenith_deg"], 180.0), observer=Observer(1.0),
@@ -66,7 +63,7 @@ for seed in (1, 2):
     seconds.append(time.process_time() - start)
     if seed == 1:
         np.save(sys.argv[2], sky.radiance)
-print(json.dumps({"seconds": seconds, "gathers": "+fast-gather" in features().decode().split(",")}))
+print(json.dumps({"seconds": seconds, "gathers": "+fast-gather" in llvm_target_features()}))
 """
 
 

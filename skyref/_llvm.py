@@ -105,6 +105,32 @@ def configure_libllvm() -> str:
     return path
 
 
+def _llvm_target():
+    """drjit-core's functions that read and set its LLVM target (cpu, features, vector width,
+    set_target), typed; None where Dr.Jit has no LLVM backend or lacks them."""
+    import drjit as dr
+
+    if not dr.has_backend(dr.JitBackend.LLVM):
+        return None
+    try:
+        core = ctypes.CDLL(os.path.join(os.path.dirname(dr.__file__), "libdrjit-core.so"))
+        cpu, features = core._Z19jit_llvm_target_cpuv, core._Z24jit_llvm_target_featuresv
+        width, set_target = core._Z21jit_llvm_vector_widthv, core._Z19jit_llvm_set_targetPKcS0_j
+    except (OSError, AttributeError):
+        return None
+    cpu.restype = features.restype = ctypes.c_char_p
+    width.restype = ctypes.c_uint32
+    set_target.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_uint32]
+    return cpu, features, width, set_target
+
+
+def llvm_target_features() -> list[str]:
+    """The features (``+avx2``, ``-xop``, ...) Dr.Jit's LLVM backend compiles for; [] where it
+    has none."""
+    target = _llvm_target()
+    return [] if target is None else (target[1]() or b"").decode().split(",")
+
+
 def allow_vector_gathers() -> bool:
     """Let Dr.Jit's LLVM backend compile gathers (table lookups) to AVX2 gather instructions;
     return whether the target was changed.
@@ -122,25 +148,12 @@ def allow_vector_gathers() -> bool:
     every kernel compiled afterwards in this process."""
     if os.environ.get(FAST_GATHER_VARIABLE, "1") == "0":
         return False
-    import drjit as dr
-
-    if not dr.has_backend(dr.JitBackend.LLVM):
+    target = _llvm_target()
+    features = llvm_target_features()
+    if target is None or "+avx2" not in features or "+fast-gather" in features or "+prefer-no-gather" in features:
         return False
-    try:
-        core = ctypes.CDLL(os.path.join(os.path.dirname(dr.__file__), "libdrjit-core.so"))
-        target_cpu = core._Z19jit_llvm_target_cpuv
-        target_features = core._Z24jit_llvm_target_featuresv
-        vector_width = core._Z21jit_llvm_vector_widthv
-        set_target = core._Z19jit_llvm_set_targetPKcS0_j
-    except (OSError, AttributeError):
-        return False
-    target_cpu.restype = target_features.restype = ctypes.c_char_p
-    vector_width.restype = ctypes.c_uint32
-    features = (target_features() or b"").split(b",")
-    if b"+avx2" not in features or b"+fast-gather" in features or b"+prefer-no-gather" in features:
-        return False
-    set_target.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_uint32]
-    set_target(target_cpu(), b",".join(features + [b"+fast-gather"]), vector_width())
+    cpu, _, width, set_target = target
+    set_target(cpu(), ",".join(features + ["+fast-gather"]).encode(), width())
     return True
 
 

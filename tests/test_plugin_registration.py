@@ -130,18 +130,15 @@ def test_no_libllvm_refuses_llvm_variants_only():
 #: Prints LLVM's target features after ``load_mitsuba`` and saves the radiance of 8 views of a
 #: clear sky by the baseline estimator to the file PROBE_OUT names.
 GATHER_PROBE = """
-    import ctypes, os
+    import os
     import numpy as np
+    from skyref._llvm import llvm_target_features
     from skyref.plugins import load_mitsuba
-    mi = load_mitsuba("llvm_ad_rgb")
-    import drjit as dr
+    load_mitsuba("llvm_ad_rgb")
     from skyref.atmosphere import bruneton2017
     from skyref.render import build_integrator
     from skyref.scene import Scene, Sun
-    core = ctypes.CDLL(os.path.join(os.path.dirname(dr.__file__), "libdrjit-core.so"))
-    features = core._Z24jit_llvm_target_featuresv
-    features.restype = ctypes.c_char_p
-    print(features().decode())
+    print(",".join(llvm_target_features()))
     integrator = build_integrator(Scene(atmosphere=bruneton2017(), sun=Sun(60.0, 180.0), wavelengths="rgb"),
                                   estimator="delta_tracking")
     zenith = np.radians(np.linspace(0.0, 89.0, 8))
