@@ -192,7 +192,7 @@ class ScatteredLightGuide:
         indices = [mi.UInt32(i) for i in self.channels]
         channels = line.optics.channel_coefficients(indices)
         light, _, _ = line.integrate(channels, p, d, h, length, self.sun_direction,
-                                     GreyProxy(channels, channels.zeros() + 1.0))
+                                     GreyProxy(channels, channels.zeros() + 1.0), forced_collision=False)
         e_sun = sun.channel_irradiance(indices)
         radiance = channel_mean(mi.ArrayXf([light[c] * e_sun[c] for c in range(len(indices))]))
         return radiance.numpy().astype(np.float64).reshape(GUIDE_LAYERS, GUIDE_ZENITH_BINS, GUIDE_AZIMUTH_BINS)

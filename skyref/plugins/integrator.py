@@ -109,6 +109,7 @@ from skyref.errors import ParameterError
 from skyref.plugins.drjit_namespace import channel_mean, xp
 from skyref.plugins.geometry import PlaneParallelSlab, SphericalShell
 from skyref.plugins.guiding import ScatteredLightGuide
+from skyref.plugins.kernels import cut_kernel
 from skyref.plugins.line_integral import GreyProxy, LineIntegral, ProxyMixture
 from skyref.plugins.optics import AtmosphereOptics, atmosphere_from_property, direction_with_cosine
 from skyref.plugins.polarization import STOKES, StokesPath, stokes_times, unpolarized
@@ -877,6 +878,8 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             # what the path's orders >= 2 are expected to bring, for the roulette
             expected = (None if self.guide.multiple is None
                         else self.guide.at(self.geometry.up(p), h).radiance(d, multiple_only=True))
+            # the camera segment and the path's later segments compile as two kernels
+            cut_kernel(radiance, path, stokes, proxy_weights, expected)
             self._scattered_light(sampler, channels, e_sun, path, stokes, radiance, proxy_weights, expected)
         orders = radiance.by_order()
         # the solar disk seen through the atmosphere is unpolarized
@@ -942,8 +945,9 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         proxy = GreyProxy(channels, throughput) if sampling is None else ProxyMixture(channels, throughput,
                                                                                       sampling.proxy_weights)
         scattered, transmittance, quadrature = self.line.integrate(
-            channels, p, d, h, length, sun_direction, proxy, rising_only, sunlight)
-        quadrature, ground_mass, mixture = proxy.mix(quadrature, on_ground)
+            channels, p, d, h, length, sun_direction, proxy, rising_only, sunlight, forced_collision=goes_on)
+        if goes_on:
+            quadrature, ground_mass, mixture = proxy.mix(quadrature, on_ground)
         ground = p + length * d
         up = geometry.up(ground)
         light, sun_disk = channels.zeros(self.stokes), channels.zeros()

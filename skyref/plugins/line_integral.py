@@ -52,6 +52,7 @@ import drjit as dr
 import mitsuba as mi
 
 from skyref.plugins.drjit_namespace import xp
+from skyref.plugins.kernels import PANELS_PER_KERNEL, cut_kernel
 from skyref.plugins.quadrature import NODES_PER_PANEL, GaussLegendreRule, insert_sorted, ordered_breakpoints
 
 __all__ = ["PANEL_THICKNESS", "QUADRATURE_DEPTH_BREAKS", "SAMPLING_DEPTH_BREAKS", "OPAQUE_PROXY_PRIOR", "grey_sum",
@@ -294,6 +295,8 @@ class PanelMap:
     Thinner panels are uniform, g(u) = u. A negative kappa draws points densest at the panel's
     end (a sampled sunlight's panel whose sun transmittance grows along it, :class:`SunTilt`)."""
 
+    DRJIT_STRUCT = {"thick": mi.Bool, "loss": mi.Float, "inv_kappa": mi.Float}
+
     def __init__(self, kappa):
         self.thick = dr.abs(kappa) > PANEL_THICKNESS
         self.loss = -dr.select(self.thick, dr.exp(-kappa) - 1.0, 0.0)
@@ -399,7 +402,8 @@ class LineIntegral:
 
     # --- single scattering along the segment ----------------------------------------------------
 
-    def integrate(self, channels, p, d, h, length, sun, grey, rising_only=False, sunlight="quadrature"):
+    def integrate(self, channels, p, d, h, length, sun, grey, rising_only=False, sunlight="quadrature",
+                  forced_collision=True):
         """Single-scattered sunlight along the segment per channel (ArrayXf, to be multiplied by
         E_sun; polarized: 2 K values, its P11 part, the radiance, then its P12 part, which is Q
         in the scattering plane's frame), its transmittance T(0, L) per channel, and the
@@ -413,7 +417,13 @@ class LineIntegral:
         shadow and keeps their lit masses, for :meth:`sampled_sunlight`; None builds the
         quadrature alone (for a forced collision whose single scattering is counted elsewhere).
         Either of the last two builds only the panels that place points
-        (:meth:`_sampling_panels`) and returns sunlight 0."""
+        (:meth:`_sampling_panels`) and returns sunlight 0. ``forced_collision`` False (sunlight
+        by quadrature only): no collision will be drawn on the segment, and the quadrature
+        returned is None.
+
+        The panels are traced ``PANELS_PER_KERNEL`` at a time into kernels of their own
+        (:mod:`skyref.plugins.kernels`): unrolled, a segment's quadrature is the longest kernel
+        of a render, and the slowest to compile."""
         if sunlight != "quadrature":
             return self._sampling_panels(channels, p, d, h, length, sun, grey, rising_only, sunlight)
         optics, rule = self.optics, self.rule
@@ -424,13 +434,17 @@ class LineIntegral:
         light = [channels.zeros() for _ in range(2 if self.polarized else 1)]
         prefix = [mi.Float(0.0) for _ in components]
         prefixes, masses, maps = [], [], []
-        for (a, b), panel_lit in zip(panels, lit):
+        cut_kernel(p, d, sun, panels, lit, phase)
+        for i, ((a, b), panel_lit) in enumerate(zip(panels, lit)):
+            if i > 0 and i % PANELS_PER_KERNEL == 0:
+                cut_kernel(light, prefix, prefixes, masses, maps)
             width = b - a
             panel_map = self._panel_map(channels, p, d, a, width)
-            maps.append(panel_map)
             stretch = [panel_map(u) for u in rule.nodes]
             nodes = [self._densities(p, d, a + width * g) for g, _ in stretch]
-            prefixes.append(list(prefix))
+            if forced_collision:
+                maps.append(panel_map)
+                prefixes.append(list(prefix))
             mass = mi.Float(0.0)
             for j, (x, hx, rho) in enumerate(nodes):
                 # optical depth from the segment's start to this node, per constituent, by the
@@ -449,17 +463,21 @@ class LineIntegral:
                                    for source, element in zip(sources, phase[c])]
                 attenuation = dr.exp(-exponent) * dr.select(panel_lit, weight, 0.0)
                 light = [part + source * attenuation for part, source in zip(light, sources)]
-                # grey proxy of sigma_s(t) T(0, t), for the forced collision
-                mass = mass + weight * dr.detach(grey_sum(grey.scattering, rho) * grey.transmittance(tau))
-            masses.append(mass)
+                if forced_collision:
+                    # grey proxy of sigma_s(t) T(0, t), for the forced collision
+                    mass = mass + weight * dr.detach(grey_sum(grey.scattering, rho) * grey.transmittance(tau))
+            if forced_collision:
+                masses.append(mass)
             # the panel's optical depth by the rule in t too: in the transmittance-spaced variable
             # a panel whose density grows along it (a ray descending into haze, where the depth
             # breaks, placed by the extinction at the segment's start, come too late) was 1e-3
             # off (absorbing aerosol of optical depth 0.3 seen at 110 deg from 5 km)
             prefix = [q + r for q, r in zip(prefix, self._unit_depth(p, d, a, width))]
         transmittance = dr.exp(-channels.optical_depth(prefix))
-        lit_masses = [dr.select(on, m, 0.0) for on, m in zip(lit, masses)]
         light = mi.ArrayXf([value for part in light for value in part])
+        if not forced_collision:
+            return light, transmittance, None
+        lit_masses = [dr.select(on, m, 0.0) for on, m in zip(lit, masses)]
         return light, transmittance, SegmentQuadrature(panels, maps, prefixes, prefix, masses, lit_masses)
 
     def _sampling_panels(self, channels, p, d, h, length, sun, grey, rising_only, sunlight):

@@ -1,0 +1,35 @@
+"""Where a render's work is cut into separate kernels, and why.
+
+Dr.Jit traces the array operations of a render and compiles them, at each evaluation, into one
+kernel (LLVM on the CPU, PTX on the GPU). The time LLVM takes grows with the *square* of a
+kernel's length: on the 2-core AMD machines (``results/kernel_compile.md``), kernels of 36,600,
+48,400, 78,600 and 80,600 operations took 7.5, 13.3, 34.8 and 39.6 s to compile. The line
+integral's quadrature is unrolled in Python (each of a segment's 25-40 panels is some 2,000
+operations), so its kernels were the longest, and cold kernel caches (every CI run) spent most of
+their time compiling them. Cut into pieces of a few panels, it compiles much faster: each piece is
+short, and the pieces of the middle panels are alike (the panels' bounds are inputs), so they
+compile once. The cost is writing the state carried across each cut to memory and reading it
+back (a few floats per panel and lane); renders took the same time (docs/design.md, "libLLVM").
+
+A cut changes no value: each piece computes in float32 what the whole kernel computed in float32
+registers (``tests/test_line_integral.py`` checks a render bit for bit against one without cuts).
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+
+__all__ = ["PANELS_PER_KERNEL", "cut_kernel"]
+
+#: Quadrature panels traced into one kernel before the next cut (:meth:`LineIntegral.integrate`).
+PANELS_PER_KERNEL = 4
+
+
+def cut_kernel(*state) -> None:
+    """Evaluate ``state`` (Dr.Jit arrays, or lists, tuples and DRJIT_STRUCT objects of them) now,
+    ending the kernel being traced, so that the work that follows compiles as a kernel of its
+    own. Inside a symbolic loop, conditional or call nothing can be evaluated, and the kernel
+    stays whole."""
+    if dr.flag(dr.JitFlag.SymbolicScope):
+        return
+    dr.eval(*state)
