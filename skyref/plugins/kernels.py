@@ -12,7 +12,7 @@ compile once. The cost is writing the state carried across each cut to memory an
 back (a few floats per panel and lane); renders took the same time (docs/design.md, "libLLVM").
 
 A cut changes no value: each piece computes in float32 what the whole kernel computed in float32
-registers (``tests/test_line_integral.py`` checks a render bit for bit against one without cuts).
+registers (``tests/test_kernels.py`` checks a render bit for bit against one without cuts).
 """
 
 from __future__ import annotations
