@@ -52,8 +52,9 @@ case "${1:-}" in
         setup
         shift
         # Two worker processes, a test file each at a time: a new kernel configuration compiles
-        # on one core for minutes (docs/design.md), so two files compile side by side.
-        exec "$VENV/bin/python" -m pytest -n 2 --dist loadfile "$@"
+        # on one core for minutes (docs/design.md), so two files compile side by side. The
+        # slowest tests are listed at the end, to show where a run's time went.
+        exec "$VENV/bin/python" -m pytest -n 2 --dist loadfile --durations=30 "$@"
         ;;
     *) echo "usage: bash run.sh demo|test|setup" >&2; exit 2 ;;
 esac

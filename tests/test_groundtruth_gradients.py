@@ -175,9 +175,9 @@ LINE_INTEGRAL_SPP, LINE_INTEGRAL_SEEDS = 256, 32
 DELTA_TRACKING_SPP, DELTA_TRACKING_SEEDS = 32768, 32
 
 #: Checked in CI (the phase function's, the best-determined); the slow tier checks every other
-#: parameter. Each parameter's derivative compiles its own line-integral kernels: about 5 minutes
-#: of CPU each on the AMD machines of 2026-12 with a cold kernel cache, so three of them made a
-#: sixth of the CI run.
+#: parameter. Each parameter's derivative compiles its own line-integral tangent kernels: 43-92 s
+#: per parameter with a cold kernel cache on the 2-core AMD machines (2026-12-06; about 5 minutes
+#: before the tangents of all orders and wavelengths came from one kernel, docs/design.md).
 LINE_INTEGRAL_CI_PARAMETERS = ("aerosol.g",)
 
 

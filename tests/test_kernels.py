@@ -1,12 +1,13 @@
 """Cutting a render into kernels (:mod:`skyref.plugins.kernels`): the cuts evaluate what they are
 given outside symbolic code and nothing inside it, and a render cut into kernels launches more
-of them and is the same to the last bit as one left whole."""
+of them and is the same to the last bit as one left whole; block sums give the closed-form sums
+and forward derivatives, the tangents of all the values from one kernel."""
 
 import drjit as dr
 import mitsuba
 import numpy as np
 
-from skyref.plugins.kernels import cut_kernel
+from skyref.plugins.kernels import cut_kernel, sum_blocks
 
 
 @dr.syntax
@@ -70,3 +71,32 @@ def test_a_render_cut_into_kernels_is_the_render_left_whole(mi, monkeypatch):
     for a, b in zip(cut, whole):
         assert np.all(np.isfinite(a)) and np.any(a > 0.0)
         assert np.array_equal(a, b)
+
+
+def test_block_sums_and_their_forward_derivatives_evaluate_all_values_in_one_kernel(mi):
+    """Three values of x over 8 lanes (l = 0..7), summed in blocks of 4 into slots (block b,
+    value i) -> 3 b + i: sums of l x, l x^2 and sin(l x), and their derivatives in x, at x = 2.
+    The tangents of the three must come from a single kernel as wide as the lanes (summed one by
+    one, Dr.Jit's own derivative of a block sum evaluates each tangent in a kernel of its own)."""
+    dr.set_flag(dr.JitFlag.KernelHistory, True)                 # (set later, it records nothing)
+    try:
+        x = mi.Float(2.0)
+        dr.enable_grad(x)
+        lane = dr.arange(mi.Float, 8)
+        values = [lane * x, lane * x * x, dr.sin(lane * x)]
+        slots = [dr.arange(mi.UInt32, 2) * 3 + i for i in range(3)]
+        sums = sum_blocks(values, 4, slots, 6)
+        dr.kernel_history()                                     # clear it
+        dr.forward(x)
+        tangents = dr.grad(sums).numpy()
+        launches = dr.kernel_history()
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+
+    blocks = [np.arange(4.0), np.arange(4.0, 8.0)]
+    expected = [[b.sum() * 2.0, b.sum() * 4.0, np.sin(2.0 * b).sum()] for b in blocks]
+    expected_tangents = [[b.sum(), b.sum() * 4.0, (b * np.cos(2.0 * b)).sum()] for b in blocks]
+    assert np.allclose(sums.numpy(), np.ravel(expected), rtol=1e-6, atol=1e-6)
+    assert np.allclose(tangents, np.ravel(expected_tangents), rtol=1e-6, atol=1e-6)
+    lane_kernels = [k for k in launches if k["type"] == dr.KernelType.JIT and k["size"] == 8]
+    assert len(lane_kernels) == 1

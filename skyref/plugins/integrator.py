@@ -109,7 +109,7 @@ from skyref.errors import ParameterError
 from skyref.plugins.drjit_namespace import channel_mean, xp
 from skyref.plugins.geometry import PlaneParallelSlab, SphericalShell
 from skyref.plugins.guiding import ScatteredLightGuide
-from skyref.plugins.kernels import cut_kernel
+from skyref.plugins.kernels import cut_kernel, sum_blocks
 from skyref.plugins.line_integral import GreyProxy, LineIntegral, ProxyMixture
 from skyref.plugins.optics import AtmosphereOptics, atmosphere_from_property, direction_with_cosine
 from skyref.plugins.polarization import STOKES, StokesPath, stokes_times, unpolarized
@@ -743,23 +743,23 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
                                    from_observer)
         scale = dr.opaque(mi.Float, n / (self.channels * spp))
         values_per_order = self.stokes * n                    # (Stokes component, wavelength)
-        image = dr.zeros(mi.Float, batches * targets * len(ORDER_NAMES) * values_per_order)
+        size = batches * targets * len(ORDER_NAMES) * values_per_order
         if self.channels == n:
             # Each target's samples are contiguous lanes (batch, target, sample): sum them block by
-            # block, in a fixed order, into the (batch, target, order, channel) layout.
-            values = [[dr.select(valid, value * scale, 0.0) for value in contribution] for contribution in contributions]
-            dr.eval(values)                                   # one path-tracer kernel for all of them
-            group = dr.arange(mi.UInt32, batches * targets)
-            for order, per_channel in enumerate(values):
-                for k, value in enumerate(per_channel):
-                    dr.scatter(image, dr.block_sum(value, spp, mode="evaluated"),
-                               (group * len(ORDER_NAMES) + order) * values_per_order + k)
-            # Run the scatters now: left pending, one would fuse into the next launch's path
-            # tracer (with one sample per block, block_sum returns its input unevaluated), making
-            # a second variant of that kernel to compile (14 s on 2 cores, RGB): renders whose
+            # block, in a fixed order, into the (batch, target, order, channel) layout, with one
+            # path-tracer kernel for all the values (and one for all their tangents). The sums
+            # run at once: left pending, they would fuse into the next launch's path tracer (with
+            # one sample per block, block_sum returns its input unevaluated), making a second
+            # variant of that kernel to compile (14 s on 2 cores, RGB): renders whose
             # single-scattering launch had 1 sample per target compiled it twice.
-            dr.eval(image)
-            return image
+            group = dr.arange(mi.UInt32, batches * targets)
+            values, slots = [], []
+            for order, contribution in enumerate(contributions):
+                for k, value in enumerate(contribution):
+                    values.append(dr.select(valid, value * scale, 0.0))
+                    slots.append((group * len(ORDER_NAMES) + order) * values_per_order + k)
+            return sum_blocks(values, spp, slots, size)
+        image = dr.zeros(mi.Float, size)
         for order, contribution in enumerate(contributions):
             for k, index in enumerate(indices * self.stokes):
                 component = k // self.channels

@@ -13,13 +13,18 @@ back (a few floats per panel and lane); renders took the same time (docs/design.
 
 A cut changes no value: each piece computes in float32 what the whole kernel computed in float32
 registers (``tests/test_kernels.py`` checks a render bit for bit against one without cuts).
+
+The opposite care goes into forward-mode derivatives: :func:`sum_blocks` evaluates the tangents
+of all of a launch's outputs in one kernel. Summed one by one, each output's tangent was its own
+evaluation, and so its own compile and run of the whole differentiated path tracer (4 orders x
+N wavelengths of them).
 """
 
 from __future__ import annotations
 
 import drjit as dr
 
-__all__ = ["PANELS_PER_KERNEL", "cut_kernel"]
+__all__ = ["PANELS_PER_KERNEL", "cut_kernel", "sum_blocks"]
 
 #: Quadrature panels traced into one kernel before the next cut (:meth:`LineIntegral.integrate`).
 PANELS_PER_KERNEL = 4
@@ -33,3 +38,38 @@ def cut_kernel(*state) -> None:
     if dr.flag(dr.JitFlag.SymbolicScope):
         return
     dr.eval(*state)
+
+
+def sum_blocks(values: list, block_size: int, slots: list, size: int):
+    """A Float array of ``size`` zeros with, at ``slots[i][b]``, the sum of lanes
+    ``b * block_size ... (b + 1) * block_size - 1`` of ``values[i]``. Every value is evaluated in
+    one kernel first, then summed block by block in a fixed order (the same bits on every run).
+
+    Differentiable in forward mode: the tangents of all ``values`` are evaluated together, in one
+    kernel, and summed the same way."""
+    return dr.custom(_BlockSums, values, block_size, slots, size)
+
+
+class _BlockSums(dr.CustomOp):
+    """:func:`sum_blocks` as a custom operation, whose forward derivative is the same sum of the
+    values' tangents, evaluated together (a block sum evaluates its input, so the built-in
+    derivative of each sum evaluated each tangent apart)."""
+
+    def eval(self, values, block_size, slots, size):
+        self.block_size, self.slots, self.size = block_size, slots, size
+        return self._sum(values)
+
+    def forward(self):
+        self.set_grad_out(self._sum(self.grad_in("values")))
+
+    def _sum(self, values):
+        dr.eval(values)
+        sums = dr.zeros(type(values[0]), self.size)
+        for value, slot in zip(values, self.slots):
+            dr.scatter(sums, dr.block_sum(value, self.block_size, mode="evaluated"), slot)
+        # Run the scatters now: left pending, they would fuse into the next kernel traced.
+        dr.eval(sums)
+        return sums
+
+    def name(self):
+        return "sum_blocks"
