@@ -377,7 +377,9 @@ def test_line_integral_matches_delta_tracking_over_a_wide_spectrum_and_a_white_g
     more than 760 nm, and a white ground keeps paths alive for tens of vertices): turbidity 3,
     ground albedo 1, sun zenith 63, 360 / 560 / 760 nm, all orders, along the zenith and the
     horizon. The two independent estimators agree within |z| < 4 per view and channel,
-    at < 0.17% relative standard error each (so that a 1% bias would show)."""
+    at < 0.17% relative standard error each (so that a 1% bias would show). Measured
+    (2026-12-06): 0.09% for the line integral at 64,000 samples (42 s; 0.05% at 320,000, 201 s),
+    0.14% for delta tracking at 300,000 (41 s)."""
     import dataclasses
 
     import skyref.atmosphere as atm
@@ -387,7 +389,7 @@ def test_line_integral_matches_delta_tracking_over_a_wide_spectrum_and_a_white_g
     atmosphere = dataclasses.replace(atm.from_turbidity(3.0), ground_albedo=1.0)
     views = np.array([direction_from_angles(z, a) for z, a in [(0.0, 0.0), (90.0, 180.0)]])
     estimates = []
-    for estimator, spp in (("line_integral", 320_000), ("delta_tracking", 300_000)):
+    for estimator, spp in (("line_integral", 64_000), ("delta_tracking", 300_000)):
         scene = Scene(atmosphere=atmosphere, sun=Sun(63.0, 0.0), wavelengths=[360.0, 560.0, 760.0],
                       render=RenderSettings(estimator=estimator))
         x = build_integrator(scene).render_directions(views, seed=5, spp=spp, batches=16).numpy().sum(axis=2)
