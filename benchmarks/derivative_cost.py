@@ -8,8 +8,8 @@ and one run of the whole differentiated path tracer per output. ``sum_blocks`` e
 one kernel.
 
 Each configuration runs in a fresh process with an empty kernel cache, twice over: with
-``sum_blocks`` replaced by the per-output sums (defined below, as the integrator summed until
-2026-12-06), and as skyref runs. Each process renders the directions once (compiling the plain
+``sum_blocks``'s sums called directly instead of as a custom operation (so Dr.Jit differentiates
+each on its own, as the integrator summed until 2026-12-06), and as skyref runs. Each process renders the directions once (compiling the plain
 kernels), then takes the derivative with respect to one parameter twice (seeds 1 and 2): the
 first pays the tangent kernels' compile, the second only their run. Reported: CPU seconds of
 the plain render and of both derivative renders, and whether both settings give the same values
@@ -52,22 +52,15 @@ import numpy as np
 from skyref.atmosphere import preset
 from skyref.plugins import load_mitsuba
 mi = load_mitsuba("llvm_ad_rgb")
-import drjit as dr
 from skyref.render import build_integrator
 from skyref.scene import Observer, RenderSettings, Scene, Sun, direction_from_angles
 job = json.loads(sys.argv[1])
 if not job["together"]:
+    # The same sums called directly, not as a custom operation: Dr.Jit differentiates each
+    # block sum on its own, as the integrator summed until 2026-12-06.
     import skyref.plugins.integrator
-
-    def per_output_sums(values, block_size, slots, size):
-        dr.eval(values)
-        sums = dr.zeros(type(values[0]), size)
-        for value, slot in zip(values, slots):
-            dr.scatter(sums, dr.block_sum(value, block_size, mode="evaluated"), slot)
-        dr.eval(sums)
-        return sums
-
-    skyref.plugins.integrator.sum_blocks = per_output_sums
+    from skyref.plugins.kernels import _BlockSums
+    skyref.plugins.integrator.sum_blocks = lambda *args: _BlockSums().eval(*args)
 if job["views"] == "test views":
     angles = [(0.0, 0.0), (40.0, 180.0), (85.0, 0.0), (120.0, 0.0)]
 else:

@@ -747,11 +747,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         if self.channels == n:
             # Each target's samples are contiguous lanes (batch, target, sample): sum them block by
             # block, in a fixed order, into the (batch, target, order, channel) layout, with one
-            # path-tracer kernel for all the values (and one for all their tangents). The sums
-            # run at once: left pending, they would fuse into the next launch's path tracer (with
-            # one sample per block, block_sum returns its input unevaluated), making a second
-            # variant of that kernel to compile (14 s on 2 cores, RGB): renders whose
-            # single-scattering launch had 1 sample per target compiled it twice.
+            # path-tracer kernel for all the values (and one for all their tangents).
             group = dr.arange(mi.UInt32, batches * targets)
             values, slots = [], []
             for order, contribution in enumerate(contributions):

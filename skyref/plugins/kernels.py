@@ -67,7 +67,10 @@ class _BlockSums(dr.CustomOp):
         sums = dr.zeros(type(values[0]), self.size)
         for value, slot in zip(values, self.slots):
             dr.scatter(sums, dr.block_sum(value, self.block_size, mode="evaluated"), slot)
-        # Run the scatters now: left pending, they would fuse into the next kernel traced.
+        # Run the scatters now: left pending, they would fuse into the next kernel traced (with
+        # one lane per block, block_sum returns its input unevaluated), the next launch's path
+        # tracer, making a second variant of it to compile (14 s on 2 cores, RGB): renders whose
+        # single-scattering launch had 1 sample per target compiled it twice.
         dr.eval(sums)
         return sums
 
