@@ -36,6 +36,7 @@ shared), delta tracking unless said:
   degrees) agreed to 0.065% (|z| < 1.1).
 """
 
+import functools
 import json
 import math
 
@@ -91,35 +92,48 @@ def directions(observer_m=0.0):
     return direction_from_angles(zenith, azimuth)
 
 
-def render_both(observer_m, sun_zenith_deg, spp, batches, seed=0, pass_spp=4096, estimator="line_integral"):
-    """(volpath, integrator with ``estimator``) radiance, each (batches, directions, RGB), ``spp`` samples per
-    direction and batch (the line integral: ``spp // LINE_INTEGRAL_SAMPLE_SHARE``). The batches
-    are independent estimates from the same launch: the rows of volpath's film, repeated
-    directions for the integrator (tracing volpath with a Python medium costs ~0.4 s a launch);
-    launches of ``pass_spp`` samples (~2 M paths) run fastest."""
+def _passes(spp, pass_spp):
+    """Launches of ``pass_spp`` samples (~2 M paths) run fastest: (passes, samples per pass)."""
+    passes = max(1, spp // pass_spp)
+    assert passes * pass_spp == spp or passes == 1
+    return passes, spp // passes
+
+
+@functools.lru_cache(maxsize=None)
+def render_volpath(observer_m, sun_zenith_deg, spp, batches, seed=0, pass_spp=4096):
+    """Stock volpath's radiance (batches, directions, RGB), ``spp`` samples per direction and
+    batch; the batches are the rows of its film. Kept for the module: both estimators are
+    compared with the same volpath renders (tracing volpath with a Python medium costs ~0.4 s a
+    launch)."""
     from skyref.plugins.volpath_scene import directions_sensor, sensor_origin, stock_volpath_scene
+
+    d = directions(observer_m)
+    passes, spp_pass = _passes(spp, pass_spp)
+    scene = mi.load_dict(stock_volpath_scene(black_ground_atmosphere(), sun_zenith_deg, SUN_AZIMUTH_DEG, observer_m,
+                                             directions_sensor(d, sensor_origin(observer_m), spp_pass, rows=batches)))
+    return sum(np.asarray(mi.render(scene, spp=spp_pass, seed=1000 * seed + k)) for k in range(passes)) / passes
+
+
+def render_integrator(observer_m, sun_zenith_deg, spp, batches, seed=0, pass_spp=4096, estimator="line_integral"):
+    """The integrator's orders 1..3 with ``estimator`` (batches, directions, RGB), ``spp``
+    samples per direction and batch (the line integral: ``spp // LINE_INTEGRAL_SAMPLE_SHARE``),
+    in the passes of :func:`render_volpath`; the batches are repeated directions of one launch."""
+    from skyref.plugins.volpath_scene import sensor_origin
 
     atmosphere = black_ground_atmosphere()
     d = directions(observer_m)
-    origin = sensor_origin(observer_m)
-    passes = max(1, spp // pass_spp)
-    assert passes * pass_spp == spp or passes == 1
-    spp_pass = spp // passes
-    scene = mi.load_dict(stock_volpath_scene(atmosphere, sun_zenith_deg, SUN_AZIMUTH_DEG, observer_m,
-                                             directions_sensor(d, origin, spp_pass, rows=batches)))
+    passes, spp_pass = _passes(spp, pass_spp)
     integrator = mi.load_dict({
         "type": "atmosphere", "atmosphere": json.dumps(atmosphere.to_dict()),
         "sun_zenith": sun_zenith_deg, "sun_azimuth": SUN_AZIMUTH_DEG, "sun_angular_radius": 0.01,
-        "observer_altitude": observer_m + origin[2], "max_depth": 64, "estimator": estimator})
+        "observer_altitude": observer_m + sensor_origin(observer_m)[2], "max_depth": 64, "estimator": estimator})
     reference_spp = spp_pass // LINE_INTEGRAL_SAMPLE_SHARE if estimator == "line_integral" else spp_pass
-    volpath, reference = 0.0, 0.0
+    reference = 0.0
     for k in range(passes):
-        pass_seed = 1000 * seed + k
-        volpath = volpath + np.asarray(mi.render(scene, spp=spp_pass, seed=pass_seed)) / passes
         # Orders 1..3 (single, double, higher): the sky without the solar disk.
-        orders = integrator.render_directions(np.tile(d, (batches, 1)), pass_seed, reference_spp).numpy()
+        orders = integrator.render_directions(np.tile(d, (batches, 1)), 1000 * seed + k, reference_spp).numpy()
         reference = reference + orders[:, 1:4, :].sum(axis=1).reshape(batches, len(d), -1) / passes
-    return volpath, reference
+    return reference
 
 
 def compare(volpath, reference):
@@ -147,7 +161,8 @@ def check_agreement(spp, batches, detectable_bias, power_over, seed=0, estimator
     below a quarter of it for the pooled difference."""
     sky = slice(0, len(SKY_VIEWS_DEG))
     for index, (observer_m, sun_zenith) in enumerate(CONFIGS):
-        result = compare(*render_both(observer_m, sun_zenith, spp, batches, seed=seed + index, estimator=estimator))
+        result = compare(render_volpath(observer_m, sun_zenith, spp, batches, seed + index),
+                         render_integrator(observer_m, sun_zenith, spp, batches, seed + index, estimator=estimator))
         label = f"{estimator}, observer {observer_m} m, sun zenith {sun_zenith} deg"
         np.set_printoptions(precision=4, suppress=True)
         print(f"\n{label}: relative difference\n{result['relative']}\nz\n{result['z']}\n"
