@@ -2,11 +2,19 @@
 unless ``SKYREF_TEST_BACKEND=cuda``), with skyref's plugins; the default scene file rendered by
 the baseline estimator."""
 
-import dataclasses
-from pathlib import Path
+import os
 
-import pytest
-from tests.variants import RGB
+# One OpenBLAS thread (NumPy's linear algebra: Gauss-Legendre nodes, DISORT's eigenproblems):
+# its threads spin while they wait, and beside Dr.Jit's thread pool and the other test worker
+# on a loaded machine a 120-ray check that takes 3 s took 55 s (np.polynomial.legendre.leggauss).
+# Set before NumPy is first imported, which reads it once.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import dataclasses  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import pytest  # noqa: E402
+from tests.variants import RGB  # noqa: E402
 
 EARTH_CLEAR = Path(__file__).resolve().parent.parent / "scenes" / "earth-clear.toml"
 
