@@ -28,7 +28,9 @@ shared), delta tracking unless said:
   and pooled z -2.1 at sun zenith 80. With an eighth of volpath's samples
   (``LINE_INTEGRAL_SAMPLE_SHARE``, 2026-12-06): 86 s alone, kernels cached (216 s with all of
   them); pooled z -2.5, 0.5, 0.1 and -2.3 over the four scenes, against -2.7, 0.5, 0.0 and
-  -2.1 with all of them (the same volpath renders: their noise, not the line integral's).
+  -2.1 with all of them (the same volpath renders). Not a bias of the line integral: against
+  delta tracking directly on the scene at sun zenith 80 from 1 km (orders 1-3, 134 M delta
+  tracking samples per view, 2026-12-06) the pooled difference was +0.002% +- 0.010%.
 * ``slow`` version (x 98304 samples, ~8 min): relative standard error 0.04-0.21% (median 0.10%),
   so a 1% bias fails everywhere; pooled 0.02%. Measured: max |z| 2.8, std of z 1.07, max
   |relative difference| 0.41%, median 0.07%, pooled differences -0.02..+0.03% (|z| < 1.5).

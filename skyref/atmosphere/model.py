@@ -25,7 +25,6 @@ __all__ = ["RADIUS_RANGE_M", "Atmosphere"]
 RADIUS_RANGE_M = (1.0e3, 1.0e8)
 
 
-
 @functools.lru_cache(maxsize=8)
 def _gauss_legendre(nodes: int):
     """Gauss–Legendre nodes and weights on [-1, 1], computed once per size (an eigenproblem:
