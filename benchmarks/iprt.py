@@ -19,7 +19,6 @@ import argparse
 import datetime
 import json
 import os
-import platform
 import sys
 import time
 
@@ -28,7 +27,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(__file__))
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
-from results_files import write_results  # noqa: E402
+from results_files import machine, write_results  # noqa: E402
 
 from tests.references import iprt  # noqa: E402
 
@@ -105,8 +104,8 @@ def main():
     unknown = sorted(set(args.cases.split(",")) - set(iprt.CASES))
     if unknown:
         parser.error(f"--cases: {', '.join(unknown)} not among {', '.join(iprt.CASES)}")
-    report = {"date": datetime.datetime.now().isoformat(timespec="minutes"), "machine": platform.processor() or
-              platform.machine(), "arguments": " ".join(sys.argv[1:]), "target": args.target, "cases": {}}
+    report = {"date": datetime.datetime.now().isoformat(timespec="minutes"), "machine": machine(),
+              "arguments": " ".join(sys.argv[1:]), "target": args.target, "cases": {}}
     for case in args.cases.split(","):
         for setting in iprt.settings(case):
             rows = setting.rows[::args.stride]

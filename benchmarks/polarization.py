@@ -19,7 +19,6 @@ import argparse
 import datetime
 import math
 import os
-import platform
 import sys
 import time
 
@@ -30,7 +29,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
 from groundtruth_speed import BATCHES, SKIES, relative_rms, scene_for, sky_mask  # noqa: E402
 
-from results_files import RESULTS, write_results  # noqa: E402
+from results_files import RESULTS, machine, write_results  # noqa: E402
 
 from skyref.io.atomic import atomic_path  # noqa: E402
 from skyref.render import render_sky  # noqa: E402
@@ -139,7 +138,7 @@ def main():
     parser.add_argument("--spp", type=int, default=256, help="samples per pixel and batch")
     args = parser.parse_args()
     report = {"date": datetime.datetime.now().isoformat(timespec="minutes"),
-              "machine": platform.processor() or platform.machine(), "arguments": " ".join(sys.argv[1:]),
+              "machine": machine(), "arguments": " ".join(sys.argv[1:]),
               "skies": {name: compare(name, args.spp) for name in SKIES}}
     os.makedirs(RESULTS, exist_ok=True)
     figure(report, os.path.join(RESULTS, "polarization.png"))

@@ -25,7 +25,6 @@ import argparse
 import datetime
 import json
 import os
-import platform
 import sys
 import time
 
@@ -34,7 +33,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(__file__))
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
-from results_files import write_results  # noqa: E402
+from results_files import machine, write_results  # noqa: E402
 
 from skyref.audit.metrics import error_maps, region_statistics  # noqa: E402
 from skyref.audit.regions import region_masks  # noqa: E402
@@ -156,7 +155,7 @@ def main():
     for mode in MODES:
         rows = evaluate_map(entries, skies[mode], os.path.join(WORK, mode, f"cache-{args.spp}spp"))
         summaries[mode] = {s["entry"]: s["kinds"] for s in entry_summary(rows)}
-    report = {"date": datetime.datetime.now().isoformat(timespec="minutes"), "machine": platform.machine(),
+    report = {"date": datetime.datetime.now().isoformat(timespec="minutes"), "machine": machine(),
               "spp": args.spp, "truth_cpu_s": {mode: sum(cpu[mode].values()) for mode in MODES},
               "truth_difference": {sky.name: truth_difference(path, polarized_path)
                                    for (sky, path), (_, polarized_path) in zip(skies["scalar"], skies["polarized"])},

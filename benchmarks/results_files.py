@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import platform
 import sys
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
@@ -13,6 +14,19 @@ from skyref.io.atomic import atomic_write  # noqa: E402
 from skyref.io.json_numpy import numpy_default  # noqa: E402
 
 RESULTS = os.path.join(os.path.dirname(__file__), "..", "results")
+
+
+def machine() -> str:
+    """The machine a benchmark ran on, for its report: architecture, CPU model (Linux's
+    /proc/cpuinfo; timings differed 3x between the AMD EPYC and Intel Xeon machines of 2026-12)
+    and core count, e.g. "x86_64, Intel(R) Xeon(R) Processor, 2 cores"."""
+    model = platform.processor()
+    try:
+        with open("/proc/cpuinfo") as f:
+            model = next((line.split(":", 1)[1].strip() for line in f if line.startswith("model name")), model)
+    except OSError:
+        pass
+    return ", ".join(part for part in (platform.machine(), model, f"{os.cpu_count()} cores") if part)
 
 
 def write_results(stem: str, report: dict, markdown: str) -> str:

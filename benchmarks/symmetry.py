@@ -20,7 +20,6 @@ import argparse
 import dataclasses
 import datetime
 import os
-import platform
 import sys
 import time
 
@@ -29,7 +28,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(__file__))
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
-from results_files import write_results  # noqa: E402
+from results_files import machine, write_results  # noqa: E402
 
 from skyref.batch.grid import load_grid  # noqa: E402
 from skyref.render import render_sky, render_to_error, rendered_pixels  # noqa: E402
@@ -143,7 +142,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.parse_args()
     report = {"date": datetime.datetime.now().isoformat(timespec="minutes"),
-              "machine": platform.processor() or platform.machine(),
+              "machine": machine(),
               "skies": {name: measure(name, *rest) for name, *rest in SKIES}}
     write_results("symmetry", report, markdown(report))
     print(markdown(report))
