@@ -19,7 +19,7 @@ mean z^2 about 1 (more where the truth's own error bars are too small), and a tr
 has mean z < 0 in its dark views.
 
 Usage: ``python benchmarks/truth_check.py [--grid grids/lut_audit.toml] [--skies 0-5,21]
-[--views 8]`` (default: every finished sky of the grid); writes ``results/truth_check.md`` and
+[--views 8]`` (default: every finished sky of the grid not checked yet); writes ``results/truth_check.md`` and
 ``results/truth_check.json``, keeping the rows of skies checked before with the same settings
 and views (each row says when it was checked).
 """
@@ -178,17 +178,21 @@ def earlier_rows(settings: dict, grid, store) -> list:
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--grid", default=os.path.join(ROOT, "grids", "lut_audit.toml"))
-    parser.add_argument("--skies", help="sky numbers, e.g. 0-5,21 (default: every finished sky)")
+    parser.add_argument("--skies", help="sky numbers, e.g. 0-5,21, checked even if checked before (default: "
+                                        "every finished sky without a check of its present truth)")
     parser.add_argument("--views", type=int, default=8, help="dark views and random views per sky (each)")
     args = parser.parse_args()
     grid = load_grid(args.grid)
     store = BatchStore(grid)
-    indices = grid.sky_numbers(args.skies) if args.skies else range(len(grid))
-    finished = [i for i in indices if store.is_finished(grid.sky_id(i))]
     grid_path = os.path.relpath(args.grid, ROOT)
     settings = {"grid": grid_path, "views_per_kind": args.views, "pilot_spp": PILOT_SPP, "max_spp": MAX_SPP,
                 "error_share": ERROR_SHARE}
     rows = {r["sky"]: r for r in earlier_rows(settings, grid, store)}
+    if args.skies:
+        indices = grid.sky_numbers(args.skies)
+    else:
+        indices = [i for i in range(len(grid)) if grid.sky_id(i) not in rows]
+    finished = [i for i in indices if store.is_finished(grid.sky_id(i))]
     for index in finished:
         r = check_sky(grid, index, args.views)
         r["checked"] = str(datetime.date.today())
