@@ -40,7 +40,7 @@ from skyref.validation import check_choice, check_int, check_number, check_outpu
 
 __all__ = ["MAX_IMAGE_VALUES", "GEOMETRIES", "sensor_dict", "build_integrator", "stokes_components",
            "check_image_size", "render_sky",
-           "rendered_pixels", "relative_error_percentile", "pixel_relative_error", "PixelPool",
+           "rendered_pixels", "relative_error_percentile", "pixel_relative_error", "stopping_error", "PixelPool",
            "AdaptiveProgress", "render_to_error", "ROUND_MARGIN", "traced_views", "render_views"]
 
 #: Most values (passes x pixels x scattering orders x Stokes components (polarized: 4) x
@@ -299,6 +299,31 @@ def pixel_relative_error(radiance: np.ndarray, standard_error: np.ndarray) -> np
     return ratio.max(axis=-1)
 
 
+def stopping_error(orders: np.ndarray, standard_error: np.ndarray, wavelengths_nm,
+                   dynamic_range: float | None = None) -> np.ndarray:
+    """Per view, the error :func:`render_to_error` holds to its target, from per-order means
+    (M, orders, N) and standard errors (M, N) (Stokes I): :func:`pixel_relative_error`, except
+    that with ``dynamic_range`` a view *dark* beside the sky, whose diffuse luminance (solar disk
+    excluded) is below ``dynamic_range`` x the brightest view's even at its radiance + 3 standard
+    errors (Y + 3 sum_i y_i SE_i, an upper bound whatever the channels' correlation), measures its
+    error per wavelength against max(radiance, ``dynamic_range`` x that wavelength's brightest
+    diffuse radiance): it is done at an absolute error of target x that floor. A consumer that
+    leaves out what is darker than ``dynamic_range`` of the brightest (the LUT audit's
+    :data:`~skyref.audit.metrics.DYNAMIC_RANGE`: the night side seen from space, at 1e-10 of the
+    day side) then does not pay for it."""
+    radiance = orders.sum(axis=1)
+    if dynamic_range is None or len(radiance) == 0:
+        return pixel_relative_error(radiance, standard_error)
+    from skyref.color import xyz_matrix  # lazy: colour-science's import cost
+
+    diffuse = orders[:, ORDER_NAMES.index("sun_direct") + 1:].sum(axis=1)
+    y = xyz_matrix(wavelengths_nm)[:, 1]
+    luminance, luminance_error = diffuse @ y, standard_error @ np.abs(y)
+    dark = luminance + 3.0 * luminance_error < dynamic_range * np.max(luminance)
+    floor = np.where(dark[:, None], dynamic_range * np.max(diffuse, axis=0), 0.0)
+    return pixel_relative_error(np.maximum(radiance, floor), standard_error)
+
+
 class PixelPool:
     """Independent estimates of the same M pixels pooled per pixel, each weighted by its number of
     samples: mean = sum_i n_i x_i / n, standard error sqrt(sum_i (n_i / n)^2 SE_i^2), with n_i
@@ -347,10 +372,12 @@ class AdaptiveProgress:
     #: Bump when the file's layout or the meaning of its values changes: older files are not used.
     FORMAT = 2
 
-    def __init__(self, pool: PixelPool, key: str):
+    def __init__(self, pool: PixelPool, key: str, wavelengths_nm, dynamic_range: float | None = None):
         """``key``: what the render is (:func:`_adaptive_key`); a file with another key is not
-        used."""
+        used. ``wavelengths_nm``, ``dynamic_range``: how the views' error is measured
+        (:func:`stopping_error`)."""
         self.pool, self.key = pool, key
+        self.wavelengths_nm, self.dynamic_range = np.asarray(wavelengths_nm, dtype=np.float64), dynamic_range
         self.round, self.launches, self.done, self.elapsed, self.used_seeds = 0, None, 0, 0.0, []
         #: CPU seconds of the process in the render's launches, and of that, the runs' before this one.
         self.cpu, self.cpu_before = 0.0, 0.0
@@ -365,7 +392,14 @@ class AdaptiveProgress:
                      launch_seeds=np.asarray([s for _, _, s in launches], dtype=np.int64),
                      launch_sizes=np.asarray([m.size for _, m, _ in launches], dtype=np.int64),
                      launch_views=np.concatenate([m for _, m, _ in launches] or [np.zeros(0, dtype=np.int64)]),
-                     samples=pool.samples, orders=pool.orders, variance=pool.variance)
+                     samples=pool.samples, orders=pool.orders, variance=pool.variance,
+                     wavelengths_nm=self.wavelengths_nm,
+                     dynamic_range=np.nan if self.dynamic_range is None else self.dynamic_range)
+
+    def error(self) -> np.ndarray:
+        """Per view, the error held to the target (:func:`stopping_error`)."""
+        return stopping_error(self.pool.orders[:, :, 0], self.pool.standard_error[:, 0], self.wavelengths_nm,
+                              self.dynamic_range)
 
     def resume(self, path) -> bool:
         """Take up the state kept in ``path`` if it holds this render's; whether it did."""
@@ -390,29 +424,37 @@ class AdaptiveProgress:
         share of its views at ``target_relative_error``, render time); None while there is none."""
         try:
             with np.load(path) as kept:
-                radiance, variance = kept["orders"].sum(axis=1), kept["variance"]
+                orders, variance = kept["orders"][:, :, 0], kept["variance"][:, 0]
                 rounds, elapsed = int(kept["round"]), float(kept["elapsed"])
+                wavelengths_nm, dynamic_range = kept["wavelengths_nm"], float(kept["dynamic_range"])
         except (FileNotFoundError, OSError, KeyError, ValueError):     # not written yet, or replaced meanwhile
             return None
-        error = pixel_relative_error(radiance[:, 0], np.sqrt(variance[:, 0]))
+        error = stopping_error(orders, np.sqrt(variance), wavelengths_nm,
+                               None if math.isnan(dynamic_range) else dynamic_range)
         return (f"{rounds} round{'s' if rounds != 1 else ''} done, {np.mean(error <= target_relative_error):.0%} of "
                 f"{error.size} views at {100 * target_relative_error:g}%, render time {elapsed:.0f} s")
 
 
-def _adaptive_key(scene, target_relative_error, seeds, max_spp, initial_spp, views) -> str:
-    """What an adaptive render is, as a digest: the scene (its render settings too), the target,
-    seeds and sample counts, the views traced, and :attr:`AdaptiveProgress.FORMAT`."""
+def _adaptive_key(scene, target_relative_error, seeds, max_spp, initial_spp, views, dynamic_range) -> str:
+    """What an adaptive render is, as a digest: the scene (its render settings too), the target
+    (and its dynamic range, where there is one), seeds and sample counts, the views traced, and
+    :attr:`AdaptiveProgress.FORMAT`."""
     what = {"format": AdaptiveProgress.FORMAT, "scene": scene.to_dict(), "target": target_relative_error,
             "seeds": [int(seed) for seed in seeds], "max_spp": int(max_spp), "initial_spp": int(initial_spp),
             "views": hashlib.sha256(np.asarray(views, dtype=np.int64).tobytes()).hexdigest()}
+    if dynamic_range is not None:
+        what["dynamic_range"] = dynamic_range
     return hashlib.sha256(json.dumps(what, sort_keys=True, default=numpy_default).encode()).hexdigest()
 
 
 def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, initial_spp: int | None = None,
-                    variant: str | None = None, symmetry: bool = True, checkpoint=None) -> Sky:
+                    variant: str | None = None, symmetry: bool = True, checkpoint=None,
+                    dynamic_range: float | None = None) -> Sky:
     """Render ``scene`` until every rendered pixel's :func:`pixel_relative_error` is at most
     ``target_relative_error``, or it has had ``max_spp`` samples: adaptive per direction, so a
-    dark pixel costs its own samples, not the sky's. A view traced once for n pixels
+    dark pixel costs its own samples, not the sky's. ``dynamic_range`` (in (0, 0.1]; None: none):
+    a pixel darker than that fraction of the brightest is held to an absolute error instead
+    (:func:`stopping_error`), for a consumer that does not look at it. A view traced once for n pixels
     (``symmetry``) may take n x ``max_spp``, what those pixels would have cost traced apart: the
     ground at a ground observer's feet, one view for the half of the sphere below the horizon,
     ended at 0.48% with 2^20 samples on a hazy sky with a low sun (turbidity 6, sun zenith 88 deg,
@@ -432,6 +474,8 @@ def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, in
     there of another render is removed at the start); it is left in place (a later call returns
     the finished sky at once), for the caller to remove."""
     check_number("target_relative_error", target_relative_error, 1e-5, 1.0)
+    if dynamic_range is not None:
+        check_number("dynamic_range", dynamic_range, 0.0, 0.1, lo_open=True)
     if checkpoint is not None:
         check_output_file(checkpoint, ".npz", "checkpoint")
     passes = scene.render.passes
@@ -445,7 +489,8 @@ def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, in
     views = pixels[traced]
     budget = max_spp * np.bincount(estimate_of, minlength=views.size)    # samples each view may take
     pool = PixelPool(views.size, len(ORDER_NAMES), len(scene.wavelengths_nm), stokes_components(scene))
-    progress = AdaptiveProgress(pool, _adaptive_key(scene, target_relative_error, seeds, max_spp, spp, views))
+    progress = AdaptiveProgress(pool, _adaptive_key(scene, target_relative_error, seeds, max_spp, spp, views,
+                                                    dynamic_range), scene.wavelengths_nm, dynamic_range)
     if checkpoint is not None and not progress.resume(checkpoint):
         with contextlib.suppress(FileNotFoundError):    # another render's state: not shown as this one's
             os.remove(checkpoint)
@@ -454,7 +499,7 @@ def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, in
         """The launches of a round: (samples per pass, positions in ``views``, seed) each."""
         if round_index == 0:
             return [(spp // passes, np.arange(views.size), seed)]
-        error = pixel_relative_error(pool.radiance[:, 0], pool.standard_error[:, 0])
+        error = progress.error()
         with np.errstate(invalid="ignore", over="ignore"):
             wanted = np.ceil(ROUND_MARGIN * pool.samples * (error / target_relative_error) ** 2) - pool.samples
         room = (budget - pool.samples) // passes                   # samples per pass left
@@ -483,11 +528,11 @@ def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, in
         progress.round, progress.launches = progress.round + 1, None
 
     # per pixel from here on: a pixel that shares its view's estimate has its samples and error
-    error = pixel_relative_error(pool.radiance[:, 0], pool.standard_error[:, 0])[estimate_of]
+    error = progress.error()[estimate_of]
     samples = pool.samples[estimate_of]
     metadata = renderer.metadata(round(samples.sum() / max(pixels.size, 1)), passes, progress.used_seeds,
                                  progress.elapsed, int(pool.samples.sum()), views.size)
-    metadata.update(target_relative_error=target_relative_error, render_cpu_s=progress.cpu,
+    metadata.update(target_relative_error=target_relative_error, dynamic_range=dynamic_range, render_cpu_s=progress.cpu,
                     render_cpu_s_before_resume=progress.cpu_before,
                     spp_range=[int(samples.min()), int(samples.max())] if pixels.size else [0, 0],
                     pixels_at_target=float(np.mean(error <= target_relative_error)) if pixels.size else 1.0)

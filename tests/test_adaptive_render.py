@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from skyref.errors import ParameterError
-from skyref.render import PixelPool, pixel_relative_error, render_sky, render_to_error, render_views
-from skyref.scene import ESTIMATORS, Camera, RenderSettings, Scene, Sun
+from skyref.render import PixelPool, pixel_relative_error, render_sky, render_to_error, render_views, stopping_error
+from skyref.scene import ESTIMATORS, Camera, Observer, RenderSettings, Scene, Sun
 
 
 def test_pixel_pool_weights_each_pixel_by_its_own_samples():
@@ -24,6 +24,67 @@ def test_pixel_relative_error_is_the_worst_wavelength():
     radiance = np.array([[1.0, 2.0], [0.0, 0.0], [0.0, 1.0]])
     error = np.array([[0.1, 0.1], [0.0, 0.0], [0.1, 0.0]])
     assert pixel_relative_error(radiance, error).tolist() == [0.1, 0.0, np.inf]
+
+
+def test_a_view_darker_than_the_dynamic_range_is_held_to_an_absolute_error():
+    """Three views at one wavelength (555 nm): a bright one (diffuse 1.0, a
+    solar disk of 1e6 on it that must not count as the brightest), one at 1e-6 of it and one at
+    2e-4. With a dynamic range of 1e-4 the dark view's error is its standard error over the floor
+    1e-4 x 1.0 (brightest diffuse); the 2e-4 view stays relative, and so does a dark view whose
+    radiance + 3 standard errors reaches the floor (its estimate too uncertain to call it dark)."""
+    orders = np.zeros((4, 4, 1))                         # views, (sun_direct, single, double, higher), wavelengths
+    orders[0, 0], orders[0, 1], orders[1, 1], orders[2, 2], orders[3, 1] = 1e6, 1.0, 1e-6, 2e-4, 1e-6
+    standard_error = np.array([[1e-3], [1e-8], [1e-6], [4e-5]])
+    relative = stopping_error(orders, standard_error, [555.0])
+    assert relative[1:] == pytest.approx([1e-2, 5e-3, 40.0])
+    floored = stopping_error(orders, standard_error, [555.0], dynamic_range=1e-4)
+    assert floored == pytest.approx([1e-3 / (1e6 + 1.0), 1e-8 / 1e-4, 5e-3, 40.0])
+
+
+def test_render_to_error_does_not_chase_what_is_darker_than_its_dynamic_range(mi, monkeypatch):
+    """Seen from 1000 km with the sun 2 deg below the observer's horizon (the LUT audit's sky
+    40), the night side of the limb is 1e-5 to 1e-10 of the day side: held to 1% relative it
+    takes views up to the sample budget. With a dynamic range of 1e-4, the views darker than that
+    are traced in the first round only and end within the target of the floor (1e-4 x each
+    channel's brightest diffuse radiance), while every view brighter than 1e-3 of the brightest
+    reaches the target in its worst channel."""
+    import skyref.render as render
+
+    scene = Scene(sun=Sun(zenith_deg=92.0), observer=Observer(altitude_m=1e6), camera=Camera(width=16, height=8),
+                  wavelengths="rgb", render=RenderSettings(passes=16, pixel_sampling="centre"))
+    launches = []
+    real_passes = render._PixelRenderer.passes
+
+    def recorded(self, pixels, *args, **kwargs):
+        launches.append(np.array(pixels))
+        return real_passes(self, pixels, *args, **kwargs)
+
+    monkeypatch.setattr(render._PixelRenderer, "passes", recorded)
+    target, dynamic_range = 0.01, 1e-4
+    sky = render_to_error(scene, target, seeds=[11, 12, 13, 14, 15], max_spp=65536, dynamic_range=dynamic_range,
+                          symmetry=False)
+    diffuse = sky.radiance - sky.orders["sun_direct"]
+    brightest = diffuse.reshape(-1, 3).max(axis=0)
+    ratio = (diffuse / brightest).max(axis=-1).reshape(-1)
+    dark = (ratio > 0) & (ratio < 1e-6)
+    lit = ratio > 1e-3
+    assert dark.sum() >= 3 and lit.sum() >= 32, (dark.sum(), lit.sum())
+    traced_later = np.zeros(ratio.size, dtype=bool)
+    for pixels in launches[1:]:
+        traced_later[pixels] = True
+    assert len(launches) > 1 and traced_later[lit].any()
+    assert not traced_later[dark].any(), np.flatnonzero(dark & traced_later)
+    error = sky.standard_error.reshape(-1, 3)
+    assert np.all(error[dark] <= target * dynamic_range * brightest), error[dark] / brightest
+    assert np.all(pixel_relative_error(sky.radiance, sky.standard_error).reshape(-1)[lit] <= target)
+    assert sky.metadata["dynamic_range"] == dynamic_range
+
+
+def test_render_to_error_refuses_a_dynamic_range_out_of_range():
+    scene = Scene(camera=Camera(width=4, height=2), wavelengths="rgb")
+    for value in (0.0, 0.5, float("nan")):
+        with pytest.raises(ParameterError, match="dynamic_range"):
+            render_to_error(scene, 0.01, seeds=[1], max_spp=64, dynamic_range=value)
 
 
 #: Per estimator, a target that takes more than the first round (16 x 16 samples) in some pixels

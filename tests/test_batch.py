@@ -54,6 +54,8 @@ GOOD_OUTPUT = 'directory = "out"\nwidth = 12\nheight = 6\nspp = 8\npasses = 2'
      'target_relative_error = 2.0}]', "output.targets[0].target_relative_error"),
     (GOOD_AXES, 'directory = "out"\ntarget_relative_error = 0.01\ntargets = [{where = {"sun.zenith_deg" = 85.0}}]',
      "output.targets[0]"),
+    (GOOD_AXES, 'directory = "out"\nspp = 32\ndynamic_range = 1e-4', "output.dynamic_range"),
+    (GOOD_AXES, 'directory = "out"\ntarget_relative_error = 0.01\ndynamic_range = 0.5', "output.dynamic_range"),
 ])
 def test_bad_grid_is_rejected_naming_the_entry(write_grid, tmp_path, axes, output, name):
     with pytest.raises(ParameterError) as info:
@@ -390,23 +392,27 @@ def test_an_adaptive_sky_killed_mid_render_resumes_from_its_checkpoint(write_gri
 
 def test_skies_matched_by_a_target_entry_are_rendered_to_its_target(write_grid, tmp_path):
     """``[[output.targets]]``: the skies at its axis values get its target, the others the grid's
-    (the LUT audit asks 0.3% of its skies up to sun zenith 92 deg, less of the twilight ones); a
-    grid without entries keeps the fingerprint it had before they existed."""
+    (the LUT audit asks 0.3% of its skies up to sun zenith 92 deg, less of the twilight ones); the
+    grid's ``dynamic_range`` reaches every sky's render; a grid without entries or dynamic range
+    keeps the fingerprint it had before they existed."""
     from skyref.batch import run_batch
     from skyref.io.exr import read_sky_exr
 
     axes = '"sun.zenith_deg" = [40.0, 60.0]'
     output = ('directory = "out"\nwidth = 8\nheight = 4\ntarget_relative_error = 0.02\nmax_spp = 65536\n'
-              'passes = 16\ntargets = [{where = {"sun.zenith_deg" = 60}, target_relative_error = 0.08}]')
+              'passes = 16\ndynamic_range = 1e-4\n'
+              'targets = [{where = {"sun.zenith_deg" = 60}, target_relative_error = 0.08}]')
     grid = load_grid(write_grid(tmp_path / "grid.toml", axes, output))
     assert [grid.target_relative_error(spec.coordinates) for spec in grid.skies()] == [0.02, 0.08]
     run_batch(grid, workers=1, progress=False, log=lambda *_: None)
     skies = [read_sky_exr(str(tmp_path / "out" / "skies" / f"sky-{i}.exr")) for i in (0, 1)]
     assert [sky.metadata["target_relative_error"] for sky in skies] == [0.02, 0.08]
+    assert [sky.metadata["dynamic_range"] for sky in skies] == [1e-4, 1e-4]
     assert skies[0].metadata["spp"] > 4 * skies[1].metadata["spp"]         # (0.08 / 0.02)^2 = 16 x the samples
 
-    plain = load_grid(write_grid(tmp_path / "plain.toml", axes, output.split("\ntargets")[0]))
+    plain = load_grid(write_grid(tmp_path / "plain.toml", axes, output.split("\ndynamic_range")[0]))
     assert '"targets"' not in plain.fingerprint() and '"targets"' in grid.fingerprint()
+    assert '"dynamic_range"' not in plain.fingerprint() and '"dynamic_range": 0.0001' in grid.fingerprint()
 
 
 def test_exported_skies_import_into_a_fresh_directory_as_rendered(write_grid, tmp_path):

@@ -18,6 +18,7 @@
     spp = 64                                 # samples per pixel, or instead:
     # target_relative_error = 0.01           # render each pixel until stderr/radiance <= 1% in every channel
     # max_spp = 16384                        #   (or this many per pixel: skyref.render.render_to_error)
+    # dynamic_range = 1e-4                   #   pixels darker than this x the brightest: to target x that floor
     passes = 16
     seed = 0
 
@@ -95,6 +96,9 @@ class OutputSettings:
     #: ``[{"where": {axis path: value, ...}, "target_relative_error": x}, ...]``: skies at those
     #: axis values get target x instead (:meth:`Grid.target_relative_error`)
     targets: tuple = ()
+    #: With a target: pixels darker than this fraction of the sky's brightest are held to an
+    #: absolute error instead (:func:`skyref.render.stopping_error`); None: every pixel to the target
+    dynamic_range: float | None = None
 
     def __post_init__(self):
         check_choice("output.format", self.format, FORMATS)
@@ -116,6 +120,11 @@ class OutputSettings:
         if self.targets and self.target_relative_error is None:
             raise ParameterError("output.targets", self.targets, "only with output.target_relative_error",
                                  "a fixed spp has no target to replace")
+        if self.dynamic_range is not None:
+            if self.target_relative_error is None:
+                raise ParameterError("output.dynamic_range", self.dynamic_range, "only with "
+                                     "output.target_relative_error", "a fixed spp has no target to relax")
+            check_number("output.dynamic_range", self.dynamic_range, 0.0, 0.1, lo_open=True)
         for i, entry in enumerate(self.targets):
             name = f"output.targets[{i}]"
             if not isinstance(entry, dict) or set(entry) != {"where", "target_relative_error"}:
@@ -311,8 +320,9 @@ class Grid:
 
     def fingerprint(self) -> str:
         """JSON that identifies the grid's content (not its file location)."""
+        # settings added later are left out while unset: a grid's fingerprint from before them holds
         output = {k: v for k, v in dataclasses.asdict(self.output).items()
-                  if k != "directory" and not (k == "targets" and not v)}   # a grid's before targets existed
+                  if k != "directory" and not (k == "targets" and not v) and not (k == "dynamic_range" and v is None)}
         return json.dumps({"base": self.base, "axes": self.axes, "output": output}, sort_keys=True)
 
 

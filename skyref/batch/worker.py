@@ -40,7 +40,7 @@ def render_and_store(task: dict) -> dict:
         seeds = [grid.seed(spec.index, r) for r in range(task["max_rounds"])]
         checkpoint = store.checkpoint_path(spec.sky_id)
         sky = render_to_error(scene, grid.target_relative_error(spec.coordinates), seeds, output.max_spp,
-                              variant=task["variant"], checkpoint=checkpoint)
+                              variant=task["variant"], checkpoint=checkpoint, dynamic_range=output.dynamic_range)
     sky.metadata["batch"] = {"sky_id": spec.sky_id, "index": spec.index, "coordinates": spec.coordinates}
 
     exr_path = store.exr_path(spec.sky_id)
