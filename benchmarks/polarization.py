@@ -5,7 +5,9 @@ Skies as in ``benchmarks/groundtruth_speed.py`` (bruneton2017; clear, hazy, suns
 observer 1 m above the ground, 128x64 equirectangular, pixel centres), at 440 nm (the bluest
 RGB channel, where Rayleigh scattering and so polarization matter most) and RGB. Per sky: the
 relative difference scalar / polarized I - 1 per pixel (its map as a figure), summarized by
-view zenith and by angle from the sun (from the line-integral estimator, the faster); the
+view zenith and by angle from the sun (from the line-integral estimator, the faster; the two
+modes trace the same paths, :func:`skyref.render.render_paired`, and the difference's standard
+error is the spread of the batches' paired differences); the
 polarized degree of linear polarization; and, per estimator, the CPU time to 1% relative RMS
 error of I (time x (error / 1%)^2) of the polarized mode against the scalar one.
 
@@ -16,6 +18,7 @@ Usage: ``python benchmarks/polarization.py [--spp N]``; writes ``results/polariz
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import datetime
 import math
 import os
@@ -32,7 +35,7 @@ from groundtruth_speed import BATCHES, SKIES, relative_rms, scene_for, sky_mask 
 from results_files import RESULTS, machine, write_results  # noqa: E402
 
 from skyref.io.atomic import atomic_path  # noqa: E402
-from skyref.render import render_sky  # noqa: E402
+from skyref.render import render_paired, render_sky  # noqa: E402
 
 ZENITH_BANDS = ((0.0, 30.0), (30.0, 60.0), (60.0, 80.0), (80.0, 88.0))
 SUN_BANDS = ((3.0, 30.0), (30.0, 70.0), (70.0, 110.0), (110.0, 180.0))
@@ -62,14 +65,31 @@ def cost(scene, spp, estimator, mask=None):
     return skies["scalar"], skies["polarized"], to_1
 
 
+def paired(scene, spp):
+    """The line integral's (scalar sky, polarized sky, standard error of their difference, CPU
+    seconds to 1% of each), the two modes tracing the same paths."""
+    for polarized in (False, True):                                # compile first, as in timed()
+        render_sky(scene, spp=BATCHES, passes=BATCHES, seed=2, polarized=polarized, estimator="line_integral",
+                   symmetry=False)
+    settings = dataclasses.replace(scene.render, passes=BATCHES, estimator="line_integral")
+    scalar, polarized, difference_error = render_paired(
+        scene.replace(render=settings), scene.replace(render=dataclasses.replace(settings, polarized=True)),
+        BATCHES * spp, seed=3)
+    mask = sky_mask(scene, scalar.directions)
+    to_1 = {mode: sky.metadata["render_cpu_s"] * (relative_rms(sky.standard_error, sky.radiance, mask) / 0.01) ** 2
+            for mode, sky in (("scalar", scalar), ("polarized", polarized))}
+    return scalar, polarized, difference_error, to_1
+
+
 def compare(sky_name, spp):
     scene = scene_for(sky_name, "rgb")
-    scalar, polarized, to_1 = cost(scene, spp, "line_integral")
+    scalar, polarized, difference_error, to_1 = paired(scene, spp)
     costs = {"line_integral": to_1, "delta_tracking": cost(scene, max(16, spp // 8), "delta_tracking")[2]}
     mask = sky_mask(scene, scalar.directions)
     blue = 2                                                       # 440 nm
     i_pol, i_scalar = polarized.radiance[..., blue], scalar.radiance[..., blue]
-    se = np.hypot(scalar.standard_error[..., blue] / i_scalar, polarized.standard_error[..., blue] / i_pol)
+    # scalar / polarized - 1 = (I_s - I_p) / I_p: its noise is the paired difference's, relative
+    se = np.where(mask, difference_error[..., blue] / i_pol, np.nan)
     difference = np.where(mask, i_scalar / i_pol - 1.0, np.nan)
     zenith = np.degrees(np.arccos(np.clip(scalar.directions[..., 2], -1, 1)))
     from_sun = np.degrees(np.arccos(np.clip(scalar.directions @ scene.sun.direction, -1, 1)))
@@ -82,8 +102,9 @@ def compare(sky_name, spp):
 
     dolp = polarized.degree_of_linear_polarization()[..., blue]
     return {"sun_zenith_deg": SKIES[sky_name][1], "turbidity": SKIES[sky_name][0],
-            "rms_rel_diff_440nm": float(np.sqrt(np.nanmean(difference ** 2))),
-            "median_rel_se_440nm": float(np.nanmedian(np.where(mask, se, np.nan))),
+            # noise-corrected: the mean square of the difference less that of its noise
+            "rms_rel_diff_440nm": float(np.sqrt(max(0.0, np.nanmean(difference ** 2) - np.nanmean(se ** 2)))),
+            "median_rel_se_440nm": float(np.nanmedian(se)),
             "by_view_zenith": [band(zenith, lo, hi) for lo, hi in ZENITH_BANDS],
             "by_angle_from_sun": [band(from_sun, lo, hi) for lo, hi in SUN_BANDS],
             "max_dolp_440nm": float(np.nanmax(np.where(mask, dolp, np.nan))),
@@ -116,8 +137,10 @@ def markdown(report):
              f"Produced {report['date']} by `python benchmarks/polarization.py {report['arguments']}` on "
              f"{report['machine']} (llvm_ad_rgb, 2 cores shared). Skies of `benchmarks/groundtruth_speed.py`, "
              "16 batches, pixel centres; differences from the line-integral estimator at 440 nm over the sky (view "
-             "zenith < 88 deg, > 3 deg from the sun; columns: mean by view zenith). Cost: CPU time to 1% relative "
-             "RMS error of I, polarized / scalar, per estimator (the same run). Map: `polarization.png`.", "",
+             "zenith < 88 deg, > 3 deg from the sun; columns: mean by view zenith), both modes tracing the same "
+             "paths (the RMS noise-corrected, the s.e. that of the batches' paired differences). Cost: CPU time "
+             "to 1% relative RMS error of I, polarized / scalar, per estimator (the same run). Map: "
+             "`polarization.png`.", "",
              "| sky | RMS scalar/polarized - 1 | median s.e. | zenith 0-30 | 30-60 | 60-80 | 80-88 | max DoLP "
              "| cost, line integral | cost, delta tracking |", "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for name, r in report["skies"].items():

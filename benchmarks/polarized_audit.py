@@ -12,7 +12,10 @@ presets' Rayleigh depolarization 0). Each sky is rendered twice by the line-inte
 with the same seed and samples, scalar and polarized; every method is compared with each
 (:func:`skyref.audit.speed_map.evaluate_map`: noise-corrected RMS of the relative luminance error
 over the sky, the solar disk and the ground excluded; per kind of sky, the worst sky). The two
-truths' own difference is measured the same way.
+truths' own difference is measured the same way, its noise from the batches' paired differences
+(:func:`skyref.render.render_paired`: the two transports trace the same paths, so most of their
+noise cancels in the difference; combined as if independent, it had left the hazy skies' difference
+unresolved at 2,048 samples).
 
 Usage: ``python benchmarks/polarized_audit.py [--spp N]``; writes ``results/polarized_audit.md``
 and ``results/polarized_audit.json``. Truths and comparisons are kept in ``out/polarized-audit``
@@ -22,11 +25,11 @@ and ``results/polarized_audit.json``. Truths and comparisons are kept in ``out/p
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import datetime
 import json
 import os
 import sys
-import time
 
 import numpy as np
 
@@ -40,9 +43,9 @@ from skyref.audit.regions import region_masks  # noqa: E402
 from skyref.audit.speed_map import (ENTRIES, KINDS, TRUTH_GRID, entry_summary, evaluate_map,  # noqa: E402
                                     map_sky_specs)
 from skyref.batch.grid import load_grid  # noqa: E402
-from skyref.io.atomic import atomic_write  # noqa: E402
+from skyref.io.atomic import atomic_path, atomic_write  # noqa: E402
 from skyref.io.exr import read_sky_exr, write_sky_exr  # noqa: E402
-from skyref.render import render_sky  # noqa: E402
+from skyref.render import render_paired  # noqa: E402
 from skyref.scene import Scene  # noqa: E402
 
 ROOT = os.path.join(os.path.dirname(__file__), "..")
@@ -54,43 +57,57 @@ SEED = 7
 CLOSE = 0.10
 
 
-def render_truths(spp: int) -> tuple[dict, dict]:
-    """mode -> [(map sky, EXR path)], rendering the truths that are not on disk yet; and the CPU
-    seconds each cost (mode -> sky name -> s; kept beside the EXR)."""
+def truth_paths(spec, spp: int) -> dict:
+    """Where a map sky's truths are kept: mode -> EXR; ``"cpu"``: the CPU seconds of each render,
+    ``"difference_error"``: the standard error of polarized I - scalar radiance (.npy)."""
+    paths = {mode: os.path.join(WORK, mode, "skies", f"{spec.sky_id}-{spp}spp.exr") for mode in MODES}
+    base = os.path.join(WORK, "pairs", f"{spec.sky_id}-{spp}spp")
+    return {**paths, "cpu": base + ".cpu.json", "difference_error": base + ".difference-error.npy"}
+
+
+def render_truths(spp: int) -> tuple[dict, dict, dict]:
+    """mode -> [(map sky, EXR path)], rendering the truths that are not on disk yet; the CPU
+    seconds each cost (mode -> sky name -> s); and per sky the path of the standard error of
+    their difference."""
     grid = load_grid(os.path.join(ROOT, TRUTH_GRID))
-    skies, cpu = {mode: [] for mode in MODES}, {mode: {} for mode in MODES}
+    skies, cpu, difference_error = {mode: [] for mode in MODES}, {mode: {} for mode in MODES}, {}
     for index, (sky, spec) in enumerate(map_sky_specs(grid)):
         scene = Scene.from_dict(spec.scene).replace(name=spec.sky_id)
-        for mode in MODES:
-            path = os.path.join(WORK, mode, "skies", f"{spec.sky_id}-{spp}spp.exr")
-            cost = path + ".cpu.json"                   # the render's CPU seconds, for later runs' reports
-            if not (os.path.exists(path) and os.path.exists(cost)):
-                start = time.process_time()
-                # every pixel traced in both modes (symmetry=False), so that their costs are per
-                # direction, as in the polarization benchmark, and their pixels' noise is independent
-                truth = render_sky(scene, spp=spp, passes=PASSES, seed=SEED + index, polarized=mode == "polarized",
-                                   estimator="line_integral", symmetry=False)
-                seconds = time.process_time() - start
+        paths = truth_paths(spec, spp)
+        if not all(os.path.exists(path) for path in paths.values()):
+            # every pixel traced in both modes, with the same seed and samples (a pair), so that
+            # their costs are per direction, as in the polarization benchmark
+            settings = dataclasses.replace(scene.render, passes=PASSES, estimator="line_integral")
+            pair = render_paired(scene.replace(render=settings),
+                                 scene.replace(render=dataclasses.replace(settings, polarized=True)),
+                                 spp, seed=SEED + index)
+            for path in paths.values():
                 os.makedirs(os.path.dirname(path), exist_ok=True)
-                write_sky_exr(truth, path)
-                with atomic_write(cost) as f:
-                    json.dump({"cpu_s": seconds}, f)
-                print(f"{sky.name}, {mode}: {seconds:.0f} CPU s", flush=True)
-            with open(cost) as f:
-                cpu[mode][sky.name] = json.load(f)["cpu_s"]
-            skies[mode].append((sky, path))
-    return skies, cpu
+            for mode, truth in zip(MODES, pair[:2]):
+                write_sky_exr(truth, paths[mode])
+            with atomic_path(paths["difference_error"]) as tmp, open(tmp, "wb") as f:
+                np.save(f, pair[2])
+            with atomic_write(paths["cpu"]) as f:
+                json.dump({mode: truth.metadata["render_cpu_s"] for mode, truth in zip(MODES, pair[:2])}, f)
+            print(f"{sky.name}: " + ", ".join(f"{mode} {truth.metadata['render_cpu_s']:.0f}" for mode, truth in
+                                              zip(MODES, pair[:2])) + " CPU s", flush=True)
+        with open(paths["cpu"]) as f:
+            seconds = json.load(f)
+        for mode in MODES:
+            cpu[mode][sky.name] = seconds[mode]
+            skies[mode].append((sky, paths[mode]))
+        difference_error[sky.name] = paths["difference_error"]
+    return skies, cpu, difference_error
 
 
-def truth_difference(scalar_path: str, polarized_path: str) -> dict:
+def truth_difference(scalar_path: str, polarized_path: str, difference_error_path: str) -> dict:
     """The scalar truth against the polarized one, as a method against a truth: luminance RMS of
-    scalar / polarized - 1 over the sky (noise-corrected with both truths' standard errors), its
-    noise and whether it is resolved."""
+    scalar / polarized - 1 over the sky (noise-corrected with the standard error of their paired
+    difference), its noise and whether it is resolved."""
     scalar, polarized = read_sky_exr(scalar_path), read_sky_exr(polarized_path)
     scene = polarized.scene
     without_disk = [sky.radiance - sky.orders.get("sun_direct", 0.0) for sky in (scalar, polarized)]
-    maps = error_maps(without_disk[0], without_disk[1], np.hypot(scalar.standard_error, polarized.standard_error),
-                      scene.wavelengths_nm)
+    maps = error_maps(without_disk[0], without_disk[1], np.load(difference_error_path), scene.wavelengths_nm)
     masks = region_masks(polarized.directions, scene.sun.direction, scene.atmosphere.bottom_radius_m,
                          scene.observer.altitude_m)
     sky = region_statistics(maps, masks)["sky"]["luminance"]
@@ -120,7 +137,8 @@ def markdown(report) -> str:
              f"{report['truth_cpu_s']['scalar']:.0f} s scalar, {report['truth_cpu_s']['polarized']:.0f} s "
              "polarized (measured when each was rendered, a kernel compilation included where that run "
              "compiled one).", "",
-             "How far apart the two truths are (luminance, scalar / polarized I - 1, RMS over the sky):", "",
+             "How far apart the two truths are (luminance, scalar / polarized I - 1, RMS over the sky; its noise "
+             "from the batches' paired differences, the two transports tracing the same paths):", "",
              "| sky | RMS | its noise |", "|---|---:|---:|"]
     for name, d in report["truth_difference"].items():
         lines.append(f"| {name} | {100 * d['rms']:.2f}%{'' if d['resolved'] else '*'} | {100 * d['noise_rms']:.2f}% |")
@@ -149,7 +167,7 @@ def main():
     args = parser.parse_args()
     if args.spp < PASSES or args.spp % PASSES:
         parser.error(f"--spp: a multiple of {PASSES}")
-    skies, cpu = render_truths(args.spp)
+    skies, cpu, difference_error = render_truths(args.spp)
     entries = [e for e in ENTRIES if e.family != "path tracer"]
     summaries = {}
     for mode in MODES:
@@ -157,7 +175,7 @@ def main():
         summaries[mode] = {s["entry"]: s["kinds"] for s in entry_summary(rows)}
     report = {"date": datetime.datetime.now().isoformat(timespec="minutes"), "machine": machine(),
               "spp": args.spp, "truth_cpu_s": {mode: sum(cpu[mode].values()) for mode in MODES},
-              "truth_difference": {sky.name: truth_difference(path, polarized_path)
+              "truth_difference": {sky.name: truth_difference(path, polarized_path, difference_error[sky.name])
                                    for (sky, path), (_, polarized_path) in zip(skies["scalar"], skies["polarized"])},
               "entries": [{"entry": e.key, "method": e.method, "label": e.label,
                            "scalar": summaries["scalar"][e.key], "polarized": summaries["polarized"][e.key]}

@@ -293,3 +293,32 @@ def test_a_scalar_render_writes_the_layers_it_always_wrote(mi, scenes, tmp_path)
     assert "polarized" not in header["skyref.scene"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["sky.exr", "sky.png"]
     assert not read_sky_exr(exr).polarized
+
+
+def test_a_paired_render_measures_the_polarized_change_of_i_with_its_own_error_bars(mi):
+    """Scalar and polarized transport of a hazy sky traced with the same samples (render_paired):
+    each sky is the render render_sky gives with that seed; the polarized change of I agrees,
+    value by value, with the one from two independent renders at 4x the samples (mean z^2 near 1
+    with the paired standard error: an error bar 2x too small would give ~4); and the paired
+    standard error is under half of the two renders' standard errors combined as if independent."""
+    from skyref.atmosphere import from_turbidity
+    from skyref.render import render_paired
+    from skyref.scene import Sun
+
+    scene = Scene(atmosphere=from_turbidity(6.0), sun=Sun(zenith_deg=40.0), camera=Camera(width=8, height=4),
+                  wavelengths="rgb", render=RenderSettings(passes=16, pixel_sampling="centre", estimator="line_integral"))
+    polarized_scene = scene.replace(render=RenderSettings(passes=16, pixel_sampling="centre",
+                                                          estimator="line_integral", polarized=True))
+    scalar, polarized, paired_error = render_paired(scene, polarized_scene, spp=4096, seed=5)
+    alone = render_sky(scene, spp=4096, seed=5, symmetry=False)
+    np.testing.assert_array_equal(scalar.radiance, alone.radiance)
+    change = polarized.radiance - scalar.radiance
+    independent = [render_sky(scene, spp=16384, seed=6, symmetry=False),
+                   render_sky(polarized_scene, spp=16384, seed=7, symmetry=False)]
+    reference = independent[1].radiance - independent[0].radiance
+    reference_error = np.hypot(independent[0].standard_error, independent[1].standard_error)
+    z = (change - reference) / np.hypot(paired_error, reference_error)
+    assert z.size == 96 and np.all(np.isfinite(z))
+    assert 0.4 < np.mean(z ** 2) < 1.9, np.mean(z ** 2)
+    as_if_independent = np.hypot(scalar.standard_error, polarized.standard_error)
+    assert np.median(paired_error / as_if_independent) < 0.5, np.median(paired_error / as_if_independent)
