@@ -355,7 +355,7 @@ def stopping_error(orders: np.ndarray, standard_error: np.ndarray, wavelengths_n
         return pixel_relative_error(radiance, standard_error)
     from skyref.color import xyz_matrix  # lazy: colour-science's import cost
 
-    diffuse = orders[:, ORDER_NAMES.index("sun_direct") + 1:].sum(axis=1)
+    diffuse = radiance - orders[:, ORDER_NAMES.index("sun_direct")]
     y = xyz_matrix(wavelengths_nm)[:, 1]
     luminance, luminance_error = diffuse @ y, standard_error @ np.abs(y)
     dark = luminance + 3.0 * luminance_error < dynamic_range * np.max(luminance)
