@@ -322,7 +322,7 @@ class Grid:
         """JSON that identifies the grid's content (not its file location)."""
         # settings added later are left out while unset: a grid's fingerprint from before them holds
         output = {k: v for k, v in dataclasses.asdict(self.output).items()
-                  if k != "directory" and not (k == "targets" and not v) and not (k == "dynamic_range" and v is None)}
+                  if k != "directory" and not (k in ("targets", "dynamic_range") and v in ((), [], None))}
         return json.dumps({"base": self.base, "axes": self.axes, "output": output}, sort_keys=True)
 
 
