@@ -44,39 +44,44 @@ SUN_BANDS = ((3.0, 30.0), (30.0, 70.0), (70.0, 110.0), (110.0, 180.0))
 ESTIMATORS = ("line_integral", "delta_tracking")
 
 
-def timed(scene, spp, polarized, estimator):
-    # compile first: one sample per batch launches the timed render's kernels (they do not
-    # depend on the launch size, tests/test_integrator_plugin.py)
-    # every pixel traced (symmetry=False): this measures the estimators' cost per direction
+def warm_up(scene, polarized, estimator):
+    """Compile the kernels a timed render launches: one sample per batch (they do not depend on
+    the launch size, tests/test_integrator_plugin.py)."""
     render_sky(scene, spp=BATCHES, passes=BATCHES, seed=2, polarized=polarized, estimator=estimator, symmetry=False)
-    start = time.process_time()
-    sky = render_sky(scene, spp=BATCHES * spp, passes=BATCHES, seed=3, polarized=polarized, estimator=estimator,
-                     symmetry=False)
-    return sky, time.process_time() - start
+
+
+def seconds_to_1pct(sky, seconds, mask):
+    """CPU seconds to 1% relative RMS error of I over ``mask``: ``seconds`` x (error / 1%)^2."""
+    return seconds * (relative_rms(sky.standard_error, sky.radiance, mask) / 0.01) ** 2
 
 
 def cost(scene, spp, estimator, mask=None):
-    """(scalar sky, polarized sky, CPU seconds to 1% of each) with ``estimator``."""
+    """(scalar sky, polarized sky, CPU seconds to 1% of each) with ``estimator``, the two modes
+    rendered apart with other seeds than the warm-up's; every pixel traced (symmetry=False): this
+    measures the estimators' cost per direction."""
     skies, to_1 = {}, {}
     for mode in ("scalar", "polarized"):
-        sky, seconds = timed(scene, spp, mode == "polarized", estimator)
+        warm_up(scene, mode == "polarized", estimator)
+        start = time.process_time()
+        sky = render_sky(scene, spp=BATCHES * spp, passes=BATCHES, seed=3, polarized=mode == "polarized",
+                         estimator=estimator, symmetry=False)
+        seconds = time.process_time() - start
         mask = sky_mask(scene, sky.directions) if mask is None else mask
-        skies[mode], to_1[mode] = sky, seconds * (relative_rms(sky.standard_error, sky.radiance, mask) / 0.01) ** 2
+        skies[mode], to_1[mode] = sky, seconds_to_1pct(sky, seconds, mask)
     return skies["scalar"], skies["polarized"], to_1
 
 
 def paired(scene, spp):
     """The line integral's (scalar sky, polarized sky, standard error of their difference, CPU
     seconds to 1% of each), the two modes tracing the same paths."""
-    for polarized in (False, True):                                # compile first, as in timed()
-        render_sky(scene, spp=BATCHES, passes=BATCHES, seed=2, polarized=polarized, estimator="line_integral",
-                   symmetry=False)
+    for polarized in (False, True):
+        warm_up(scene, polarized, "line_integral")
     settings = dataclasses.replace(scene.render, passes=BATCHES, estimator="line_integral")
     scalar, polarized, difference_error = render_paired(
         scene.replace(render=settings), scene.replace(render=dataclasses.replace(settings, polarized=True)),
         BATCHES * spp, seed=3)
     mask = sky_mask(scene, scalar.directions)
-    to_1 = {mode: sky.metadata["render_cpu_s"] * (relative_rms(sky.standard_error, sky.radiance, mask) / 0.01) ** 2
+    to_1 = {mode: seconds_to_1pct(sky, sky.metadata["render_cpu_s"], mask)
             for mode, sky in (("scalar", scalar), ("polarized", polarized))}
     return scalar, polarized, difference_error, to_1
 
