@@ -68,7 +68,9 @@ def test_new_sample_counts_reuse_the_compiled_path_kernels(mi, estimator):
     compiled it again for each observer; with one sample per target in the line integral's
     single-scattering launch, a scatter left pending fused into it: 2 and 9 samples per
     direction compiled it twice; one direction alone, its one-entry table read as a scalar,
-    compiled both path kernels again.)"""
+    compiled both path kernels again.) Both turbidities are above the ground guide's switch
+    (``GROUND_GUIDE_FORWARD_SHARE``, about turbidity 2.5), which compiles a second variant of the
+    line integral's path kernel on purpose."""
     import drjit as dr
 
     from skyref.plugins.integrator import AtmosphereIntegrator
@@ -77,7 +79,7 @@ def test_new_sample_counts_reuse_the_compiled_path_kernels(mi, estimator):
     hashes = []
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     try:
-        for turbidity, count, spp, seed, observer_m in [(2.0, 64, 2, 1, 1.0), (2.0, 96, 3, 2, 1.0),
+        for turbidity, count, spp, seed, observer_m in [(3.0, 64, 2, 1, 1.0), (3.0, 96, 3, 2, 1.0),
                                                         (4.0, 40, 5, 3, 500.0), (4.0, 40, 9, 4, 1.0),
                                                         (4.0, 1, 9, 5, 1.0)]:
             directions = rng.normal(size=(count, 3))

@@ -484,3 +484,52 @@ def test_sun_can_graze_where_some_point_has_the_sun_below_its_horizon(mi):
     assert not ground.sun_can_graze(89.9 - arc) and ground.sun_can_graze(90.1 - arc)
     assert SphericalShell(R, R + 100_000.0, 200_000.0).sun_can_graze(0.0)
     assert not PlaneParallelSlab(100_000.0, 0.0).sun_can_graze(120.0)
+
+
+def test_ground_guided_reflection_weight_is_unbiased(mi):
+    """The direction a path takes off the ground under hazy air (the guide mixed with the cosine,
+    GROUND_GUIDE_PROBABILITY): its weight (cos / pi) / pdf has mean 1 and weighted by cos theta
+    2/3, the cosine-weighted hemisphere's integrals of 1 and of cos theta, over 2^20 draws (each
+    within 0.2%: a pdf that left out the guide's density, or the guide's own pdf off its sampling,
+    misses by tens of percent)."""
+    import drjit as dr
+    import skyref.atmosphere as atm
+
+    integ = line_integrator(mi, atm.from_turbidity(6.0), 80.0, max_depth=8)
+    assert integ.ground_guided
+    n = 1 << 20
+    u = np.random.default_rng(3).random((3, n)).astype(np.float32)
+    up = mi.Vector3f(0.0, 0.0, 1.0)
+    direction, weight = integ._reflect_direction(dr.zeros(mi.Vector3f, n) + up, mi.Float(u[0]),
+                                                 mi.Point2f(u[1], u[2]))
+    w, cos = weight.numpy(), direction.z.numpy()
+    assert np.all((w >= 0.0) & (w <= 1.0 / (1.0 - 0.3) + 1e-4))
+    assert abs(w.mean() - 1.0) < 2e-3, w.mean()
+    assert abs((w * cos).mean() - 2.0 / 3.0) < 2e-3 * 2.0 / 3.0, (w * cos).mean()
+
+
+def test_ground_guided_reflection_changes_only_the_noise(mi, monkeypatch):
+    """Hazy air (turbidity 6, albedo 0.3) seen from 1 km, sun zenith 80: paths leaving the ground by
+    the guide mixture and by the cosine alone (GROUND_GUIDE_FORWARD_SHARE above 1 turns it off)
+    agree within |z| < 4 at < 0.17% relative standard error each, on two views of the ground and
+    one of the sky at 440 / 550 / 680 nm; and the guided paths' per-sample variance of the ground's
+    views is at most 0.8x the cosine's (measured 2026-12-06: 0.62, max |z| 1.2)."""
+    import skyref.atmosphere as atm
+    import skyref.plugins.integrator as integrator
+    from skyref.render import build_integrator
+    from skyref.scene import Observer, Scene, Sun, direction_from_angles
+
+    views = np.array([direction_from_angles(z, a) for z, a in [(120.0, 20.0), (170.0, 90.0), (80.0, 0.0)]])
+    scene = Scene(atmosphere=atm.from_turbidity(6.0).replace(ground_albedo=0.3), sun=Sun(80.0, 0.0),
+                  observer=Observer(1000.0), wavelengths=WL)
+    estimates = []
+    for share in (integrator.GROUND_GUIDE_FORWARD_SHARE, 2.0):
+        monkeypatch.setattr(integrator, "GROUND_GUIDE_FORWARD_SHARE", share)
+        integ = build_integrator(scene)
+        assert integ.ground_guided == (share <= 1.0)
+        x = integ.render_directions(views, seed=9, spp=32_000, batches=16).numpy().sum(axis=2)
+        estimates.append((x.mean(axis=0), x.std(axis=0, ddof=1) / 4.0))
+    (a, se_a), (b, se_b) = estimates
+    print("variance ratio, views of the ground:", np.sum((se_a[:2] / a[:2]) ** 2) / np.sum((se_b[:2] / b[:2]) ** 2))
+    assert_estimators_agree(estimates, 1.7e-3)
+    assert np.sum((se_a[:2] / a[:2]) ** 2) < 0.8 * np.sum((se_b[:2] / b[:2]) ** 2)
