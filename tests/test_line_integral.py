@@ -491,7 +491,9 @@ def test_ground_guided_reflection_weight_is_unbiased(mi):
     GROUND_GUIDE_PROBABILITY): its weight (cos / pi) / pdf has mean 1 and weighted by cos theta
     2/3, the cosine-weighted hemisphere's integrals of 1 and of cos theta, over 2^20 draws (each
     within 0.2%: a pdf that left out the guide's density, or the guide's own pdf off its sampling,
-    misses by tens of percent)."""
+    misses by tens of percent); and the guided draws aim at the aureole: at sun zenith 80, at least
+    3x as many directions within 15 deg of the sun as the cosine alone sends there (measured
+    2026-12-07: 7.8% against 1.2%)."""
     import drjit as dr
     import skyref.atmosphere as atm
 
@@ -499,21 +501,28 @@ def test_ground_guided_reflection_weight_is_unbiased(mi):
     assert integ.ground_guided
     n = 1 << 20
     u = np.random.default_rng(3).random((3, n)).astype(np.float32)
-    up = mi.Vector3f(0.0, 0.0, 1.0)
-    direction, weight = integ._reflect_direction(dr.zeros(mi.Vector3f, n) + up, mi.Float(u[0]),
-                                                 mi.Point2f(u[1], u[2]))
+    up = dr.zeros(mi.Vector3f, n) + mi.Vector3f(0.0, 0.0, 1.0)
+    direction, weight = integ._reflect_direction(up, mi.Float(u[0]), mi.Point2f(u[1], u[2]))
     w, cos = weight.numpy(), direction.z.numpy()
     assert np.all((w >= 0.0) & (w <= 1.0 / (1.0 - 0.3) + 1e-4))
     assert abs(w.mean() - 1.0) < 2e-3, w.mean()
     assert abs((w * cos).mean() - 2.0 / 3.0) < 2e-3 * 2.0 / 3.0, (w * cos).mean()
+    near_sun = np.cos(np.radians(15.0))
+    guided = np.mean(np.array(direction).T @ integ.sun.direction.numpy().ravel() > near_sun)
+    integ.ground_guided = False
+    direction, _ = integ._reflect_direction(up, None, mi.Point2f(u[1], u[2]))
+    cosine = np.mean(np.array(direction).T @ integ.sun.direction.numpy().ravel() > near_sun)
+    print(f"within 15 deg of the sun: guided {guided:.4f}, cosine {cosine:.4f}")
+    assert guided > 3.0 * cosine, (guided, cosine)
 
 
 def test_ground_guided_reflection_changes_only_the_noise(mi, monkeypatch):
     """Hazy air (turbidity 6, albedo 0.3) seen from 1 km, sun zenith 80: paths leaving the ground by
     the guide mixture and by the cosine alone (GROUND_GUIDE_FORWARD_SHARE above 1 turns it off)
     agree within |z| < 4 at < 0.17% relative standard error each, on two views of the ground and
-    one of the sky at 440 / 550 / 680 nm; and the guided paths' per-sample variance of the ground's
-    views is at most 0.8x the cosine's (measured 2026-12-06: 0.62, max |z| 1.2)."""
+    one of the sky at 440 / 550 / 680 nm (a 1% bias would be 4 combined standard errors or more).
+    (The guided variance of the ground's views, measured 2026-12-06 over three such runs: 0.62-0.94x
+    the cosine's; the tail makes 16 batches' variance too uncertain to assert on.)"""
     import skyref.atmosphere as atm
     import skyref.plugins.integrator as integrator
     from skyref.render import build_integrator
@@ -527,9 +536,6 @@ def test_ground_guided_reflection_changes_only_the_noise(mi, monkeypatch):
         monkeypatch.setattr(integrator, "GROUND_GUIDE_FORWARD_SHARE", share)
         integ = build_integrator(scene)
         assert integ.ground_guided == (share <= 1.0)
-        x = integ.render_directions(views, seed=9, spp=32_000, batches=16).numpy().sum(axis=2)
+        x = integ.render_directions(views, seed=9, spp=48_000, batches=16).numpy().sum(axis=2)
         estimates.append((x.mean(axis=0), x.std(axis=0, ddof=1) / 4.0))
-    (a, se_a), (b, se_b) = estimates
-    print("variance ratio, views of the ground:", np.sum((se_a[:2] / a[:2]) ** 2) / np.sum((se_b[:2] / b[:2]) ** 2))
     assert_estimators_agree(estimates, 1.7e-3)
-    assert np.sum((se_a[:2] / a[:2]) ** 2) < 0.8 * np.sum((se_b[:2] / b[:2]) ** 2)

@@ -1044,8 +1044,10 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             stokes = stokes.reflect(~in_air)
             scattering_weight = scattering_weight * factor
         air_throughput = throughput * weight * scattering_weight * dr.rcp(dr.maximum(p_air, 1e-30))
-        u_ground = dr.clip((vertex_sample.x - p_air) / dr.maximum(1.0 - p_air, 1e-30), 0.0, 1.0)
-        d_ground, reflection_weight = self._reflect_direction(up, u_ground, u_direction)
+        # the ground's choice of strategy has its own number: "where" rescaled to [p_air, 1) keeps
+        # only a few distinct values where the ground's share 1 - p_air is tiny
+        d_ground, reflection_weight = self._reflect_direction(
+            up, sampler.next_1d() if self.ground_guided else None, u_direction)
         ground_throughput = (throughput * transmittance * channels.albedo * reflection_weight
                              / dr.maximum(1.0 - p_air, 1e-30))
         next_vertex = PathVertex(dr.select(in_air, x, ground), dr.select(in_air, hx, 0.0),
@@ -1057,9 +1059,9 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         """The direction a line-integral path takes off the Lambertian ground (normal ``up``)
         and its weight (cos theta / pi) / pdf, the albedo apart: by the cosine, or where
         ``ground_guided``, with probability :data:`GROUND_GUIDE_PROBABILITY` (``u_choice``
-        below it) from the guide's lowest layer, one-sample MIS of the two (balance heuristic: the
-        weight stays below 1 / (1 - that probability)); a guided direction below the horizon
-        weighs 0."""
+        below it; None where not guided) from the guide's lowest layer, one-sample MIS of the
+        two (balance heuristic: the weight stays below 1 / (1 - that probability)); a guided
+        direction below the horizon weighs 0."""
         direction = mi.Frame3f(up).to_world(mi.warp.square_to_cosine_hemisphere(u_direction))
         if not self.ground_guided:
             return direction, mi.Float(1.0)
