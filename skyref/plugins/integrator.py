@@ -18,12 +18,12 @@ comes from (:mod:`skyref.plugins.guiding`), that mixture itself mixed over the w
 the phase function alone (:class:`PathSampling`), and its directions resampled by phase function x
 guide (but at twilight); its Russian roulette weighs what a path is expected to bring by the
 guide's radiance (``IMPORTANCE_ROULETTE_WINDOW``); under hazy air a path leaving the ground
-draws its direction from the guide too (``GROUND_GUIDE_PROBABILITY``). For a fixed camera direction the camera
-segment's light is traced apart, once per few paths. Its quadrature is within 1e-4 of a refined
-one (tests/test_line_integral.py) on clear and hazy skies up to the horizon, with a low sun's
-finite disk and at twilight (sun zenith 92-100 deg, where the panels also split at the points
-whose rays to the sun graze the profiles' levels); see ``results/groundtruth_speed.md`` for its
-speed and ``docs/design.md`` for why it is built so.
+draws its direction from the guide too (``GROUND_GUIDE_PROBABILITY``). For a fixed camera
+direction the camera segment's light is traced apart, once per few paths. Its quadrature is
+within 1e-4 of a refined one (tests/test_line_integral.py) on clear and hazy skies up to the
+horizon, with a low sun's finite disk and at twilight (sun zenith 92-100 deg, where the panels
+also split at the points whose rays to the sun graze the profiles' levels); see
+``results/groundtruth_speed.md`` for its speed and ``docs/design.md`` for why it is built so.
 Scenes with objects use delta tracking.
 
 **Polarization** (``polarized``, opt-in): both estimators then transport Stokes vectors. A path
@@ -526,7 +526,8 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             if self.guide is not None and not self.twilight:
                 self._guide_multiple_scattering()
                 self.resampled_directions = RESAMPLED_DIRECTIONS
-            self.ground_guided = (self.guide is not None and np.any(atmosphere.ground_albedo(self.wavelengths_nm) > 0.0)
+            reflects = bool(np.any(atmosphere.ground_albedo(self.wavelengths_nm) > 0.0))
+            self.ground_guided = (self.guide is not None and reflects
                                   and self._forward_scattering_share(atmosphere) >= GROUND_GUIDE_FORWARD_SHARE)
 
     def _guide_multiple_scattering(self):
@@ -567,10 +568,11 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         """The share of the column's scattering optical depth, at the guide's wavelengths, that
         forward-peaked constituents (aerosols) carry."""
         wavelengths = [self.wavelengths_nm[k] for k in guide_channels(self.wavelengths_nm)]
-        depth = {c.name: float(np.mean(c.scattering_coefficient(wavelengths))) * c.profile.column(0.0, atmosphere.thickness_m)
-                 for c in atmosphere.constituents if c.phase is not None}
-        forward = sum(depth[c.name] for c in atmosphere.constituents if c.phase is not None and c.phase.has_forward_peak)
-        return forward / max(sum(depth.values()), 1e-30)
+        scatterers = [c for c in atmosphere.constituents if c.phase is not None]
+        depth = [float(np.mean(c.scattering_coefficient(wavelengths))) * c.profile.column(0.0, atmosphere.thickness_m)
+                 for c in scatterers]
+        forward = sum(tau for c, tau in zip(scatterers, depth) if c.phase.has_forward_peak)
+        return forward / max(sum(depth), 1e-30)
 
     @staticmethod
     def _sun_lobe_g(atmosphere) -> float:
@@ -1066,7 +1068,8 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         if not self.ground_guided:
             return direction, mi.Float(1.0)
         guide, a = self.guide.at(up, mi.Float(0.0)), GROUND_GUIDE_PROBABILITY
-        direction = dr.select(u_choice < a, guide.sample(u_choice / a, u_direction.x, u_direction.y), direction)
+        guided = guide.sample(u_choice / a, u_direction.x, u_direction.y)
+        direction = dr.select(u_choice < a, guided, direction)
         cosine_pdf = dr.maximum(dr.dot(up, direction), 0.0) / math.pi
         pdf = (1.0 - a) * cosine_pdf + a * guide.pdf(direction)
         return direction, dr.detach(dr.select(pdf > 0.0, cosine_pdf * dr.rcp(pdf), 0.0))
