@@ -20,8 +20,10 @@ Usage: ``python benchmarks/lut_audit.py`` (everything; hours on 2 cores, Bruneto
 dominates). Parts can run separately: ``--part grid|sweeps`` and ``--methods NAME ...`` (the
 sweeps render only their own 12 skies of the grid: hours on 2 cores at the grid's 0.3% target); each
 part's numbers are kept in results/lut_audit/<part>_<method>.json and the report is rebuilt from
-every JSON present, so a long audit can be completed in pieces. Writes results/lut_audit.md,
-results/lut_audit.csv and results/lut_audit/*.png.
+every JSON present, so a long audit can be completed in pieces. ``--rendered-only`` audits the
+grid on the skies whose ground truth is already rendered and renders nothing (the report says how
+many of each atmosphere's skies its rows cover), so a truth that takes days to render is audited
+as it grows. Writes results/lut_audit.md, results/lut_audit.csv and results/lut_audit/*.png.
 """
 
 from __future__ import annotations
@@ -113,6 +115,11 @@ def truth_skies(grid, directory):
         yield spec.index, spec.coordinates, os.path.join(directory, "skies", f"{spec.sky_id}.exr")
 
 
+def rendered_skies(grid, directory):
+    """:func:`truth_skies` whose ground truth has been rendered."""
+    return [sky for sky in truth_skies(grid, directory) if os.path.exists(sky[2])]
+
+
 def evaluate(name, options, skies, log, derive=None, built=None):
     """Audit method ``name`` with ``options`` on ``skies`` (list of (index, coordinates, path)),
     building it once per atmosphere; with ``derive``, audit ``derive(method)`` instead, and keep
@@ -174,11 +181,14 @@ def grid_tables(grid, rows_by_method):
              "| method | atmosphere | precompute (s) | per view (ms) | lookup (ns/dir) | sky RMS | sky p95 | horizon RMS "
              "| sun RMS | anti-solar RMS | ground RMS | CIEDE2000 p95 |",
              "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    per_atmosphere = len(observers) * len(suns)
     for name, rows in rows_by_method.items():
         for a, label in enumerate(labels):
             sub = [r for r in rows if r["coordinates"]["atmosphere"] == atmospheres[a]]
             if not sub:
                 continue
+            if len(sub) < per_atmosphere:
+                label += f" ({len(sub)} of {per_atmosphere} skies)"
 
             def fmt(region, stat="rms", metric="luminance", scale=100.0):
                 return f"{scale * _median(sub, region, metric, stat):.1f} ({scale * _worst(sub, region, metric, stat):.0f})"
@@ -190,7 +200,8 @@ def grid_tables(grid, rows_by_method):
     lines += ["", "## Sky luminance RMS error (%) by sun zenith and observer altitude", "",
               "`*`: not resolved (the ground truth's noise on it exceeds 1/5 of it, or most of the region's "
               "pixels were too noisy to measure: the ground truth needs more samples there); `–`: no lit sky "
-              "pixels (from 1000 km no pixel centre of the 64x32 grid falls on the limb).", ""]
+              "pixels (from 1000 km no pixel centre of the 64x32 grid falls on the limb); blank: the sky's ground "
+              "truth is not rendered yet.", ""]
     for name, rows in rows_by_method.items():
         for a, label in enumerate(labels):
             lookup = {(r["coordinates"]["observer.altitude_m"], r["coordinates"]["sun.zenith_deg"]): r
@@ -239,6 +250,11 @@ def sweep_skies(grid, directory, atmosphere: int):
             if s[1]["atmosphere"] == grid.axes["atmosphere"][atmosphere]
             and s[1]["observer.altitude_m"] in SWEEP_SKIES["observer.altitude_m"]
             and s[1]["sun.zenith_deg"] in SWEEP_SKIES["sun.zenith_deg"]]
+
+
+def sweep_indices(grid, directory) -> list:
+    """Grid indices of the sweep skies of both atmospheres the sweeps use (clear and hazy)."""
+    return sorted(index for atmosphere in (0, 1) for index, _, _ in sweep_skies(grid, directory, atmosphere))
 
 
 def sweep(grid, directory, name, log):
@@ -330,6 +346,9 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--part", choices=("all", "grid", "sweeps", "report", "ship"), default="all")
     parser.add_argument("--methods", nargs="*", default=list(METHODS))
+    parser.add_argument("--rendered-only", action="store_true",
+                        help="render nothing; audit the grid on the skies already rendered (the sweeps still "
+                             "need all of theirs)")
     args = parser.parse_args()
     grid = load_grid(GRID)
     log = print
@@ -339,21 +358,23 @@ def main():
         return
     if os.path.isdir(SHIPPED_TRUTH):
         import_skies(grid, SHIPPED_TRUTH, log=log, parameter="results/lut_audit/truth")
+    directory = grid.output.directory
     if args.part != "report":
-        # The sweeps need only their own skies of the grid; the grid part needs all of them.
-        needed = (range(len(grid)) if args.part != "sweeps" else
-                  sorted(index for atmosphere in (0, 1)
-                         for index, _, _ in sweep_skies(grid, grid.output.directory, atmosphere)))
-        run_batch(grid, log=log, indices=needed)
-        missing = [index for index, _, path in truth_skies(grid, grid.output.directory)
+        # The sweeps need only their own skies of the grid; the grid part needs all of them, or
+        # with --rendered-only none (it audits those there are).
+        needed = sweep_indices(grid, directory) if args.part == "sweeps" else list(range(len(grid)))
+        if args.rendered_only:
+            needed = sweep_indices(grid, directory) if args.part in ("all", "sweeps") else []
+        else:
+            run_batch(grid, log=log, indices=needed)
+        missing = [index for index, _, path in truth_skies(grid, directory)
                    if index in needed and not os.path.exists(path)]
         if missing:
             sys.exit(f"ground truth incomplete: {len(missing)} of {len(needed)} skies missing; rerun to resume")
-    directory = grid.output.directory
     for name in args.methods:
         if args.part in ("all", "grid"):
             log(f"{name}: the standard grid")
-            _save("grid", name, evaluate(name, {}, list(truth_skies(grid, directory)), log))
+            _save("grid", name, evaluate(name, {}, rendered_skies(grid, directory), log))
         if args.part in ("all", "sweeps"):
             log(f"{name}: sweeps")
             _save("sweeps", name, sweep(grid, directory, name, log))
@@ -367,11 +388,17 @@ def write_report(grid):
         plot_grid(grid, rows_by_method, os.path.join(RESULTS, "lut_audit", "error_vs_sun.png"))
     if points:
         plot_pareto(points, os.path.join(RESULTS, "lut_audit", "pareto.png"))
-    truth = describe_truth(truth_provenance(path for _, _, path in truth_skies(grid, grid.output.directory)))
+    # The truth the rows were measured on: the skies of the grid rows and of the sweeps.
+    audited = {r["index"] for rows in rows_by_method.values() for r in rows}
+    if points:
+        audited |= set(sweep_indices(grid, grid.output.directory))
+    truth = describe_truth(truth_provenance(path for index, _, path in truth_skies(grid, grid.output.directory)
+                                            if index in audited))
+    skies = f"{len(grid)} skies" if len(audited) == len(grid) else f"{len(audited)} of its {len(grid)} skies so far"
     lines = ["# LUT audit: Bruneton 2017, Elek 2009 / Bodare–Sandberg, Hillaire 2020 vs skyref's ground truth", "",
              f"Generated by `python benchmarks/lut_audit.py` (report rebuilt {datetime.date.today()}; "
              f"{machine()}, CPU LLVM backend, double-precision lookups) from the "
-             f"ground truth of `skyref batch grids/lut_audit.toml` ({len(grid)} skies; {truth}). "
+             f"ground truth of `skyref batch grids/lut_audit.toml` ({skies}; {truth}). "
              "Methods in this report: "
              + (", ".join(rows_by_method) or "none yet") + ".", "",
              "Every method gets the same `Atmosphere`, the same 17 wavelengths (380–780 nm) and the same view "
