@@ -159,8 +159,9 @@ def sheet(tmp_path_factory):
     for i, (sky, path) in enumerate(skies):
         truth_rgb = synthetic_truth(path, blue=1.0 + i)
         if sky.kind in errors:
-            save_cached(cache_path(cache, method, sky), {}, (truth_rgb * (1.0 + errors[sky.kind])[..., None]).astype(np.float32))
-        save_cached(cache_path(cache, refusing, sky), {"refused": "outside its range"}, None)
+            save_cached(cache_path(cache, method, sky, path), {},
+                        (truth_rgb * (1.0 + errors[sky.kind])[..., None]).astype(np.float32))
+        save_cached(cache_path(cache, refusing, sky, path), {"refused": "outside its range"}, None)
     return [method, refusing], skies, cache, errors
 
 

@@ -191,14 +191,27 @@ def test_advise_cli(tmp_path, capsys):
 # --- the map measures what it claims ------------------------------------------------------------
 
 def test_a_refitted_table_is_not_served_from_the_cache(tmp_path):
-    table = tmp_path / "hosek.npz"
+    table, truth = tmp_path / "hosek.npz", tmp_path / "truth.exr"
     entry = Entry("hosek2012", "analytic", "skyref fit", {"table": str(table)})
     sky = MapSky("clear, sun 30°", "clear", 0, 0.0, 30.0)
     table.write_bytes(b"first fit")
-    first = cache_path(str(tmp_path), entry, sky)
-    assert cache_path(str(tmp_path), entry, sky) == first
+    truth.write_bytes(b"first truth")
+    first = cache_path(str(tmp_path), entry, sky, str(truth))
+    assert cache_path(str(tmp_path), entry, sky, str(truth)) == first
     table.write_bytes(b"second fit")
-    assert cache_path(str(tmp_path), entry, sky) != first
+    assert cache_path(str(tmp_path), entry, sky, str(truth)) != first
+
+
+def test_a_rerendered_truth_is_not_served_from_the_cache(tmp_path):
+    """The LUT truth's skies are rendered again when the estimator improves: a row measured
+    against the old EXR must not stand for the new one."""
+    truth = tmp_path / "sky-043.exr"
+    entry = Entry("bruneton2017", "LUT", "paper")
+    sky = MapSky("hazy (T=6), sun 30°", "hazy", 1, 0.0, 30.0)
+    truth.write_bytes(b"rendered to 0.3% by the estimator of 2026-12-05")
+    first = cache_path(str(tmp_path), entry, sky, str(truth))
+    truth.write_bytes(b"rendered to 0.3% by the estimator of 2026-12-06")
+    assert cache_path(str(tmp_path), entry, sky, str(truth)) != first
 
 
 def test_path_tracer_error_is_its_own_noise(tmp_path, mi, monkeypatch):

@@ -333,10 +333,10 @@ def contact_sheet_figure(entries, skies, cache_dir: str):
     # Every panel first: the error scale is fitted to all of them.
     panels = {}
     for i, (_, entry) in enumerate(rows):
-        for j, ((sky, _), (truth_rgb, exposure, directions, size)) in enumerate(zip(sheet_skies, truths)):
+        for j, ((sky, sky_path), (truth_rgb, exposure, directions, size)) in enumerate(zip(sheet_skies, truths)):
             rgb = truth_rgb
             if entry is not None:
-                cached = cache_path(cache_dir, entry, sky)
+                cached = cache_path(cache_dir, entry, sky, sky_path)
                 rgb = load_cached(cached)[1] if os.path.exists(cached) else None
             if rgb is None:
                 panels[i, j] = None

@@ -25,9 +25,10 @@ which is what an engine on a GPU pays for. The path tracer's per-direction time 
 time at that sample count. The cost of a frame of ``n`` directions seen from scratch is
 precompute + per view + n x lookup (:func:`frame_seconds`).
 
-Rows are cached per (entry, sky) under ``out/report/cache`` (with linear sRGB images for the
-contact sheet), so the map is completed in pieces and rebuilt without recomputation; rows of an
-earlier :data:`CACHE_VERSION` are measured again.
+Rows are cached per (entry, sky, the truth EXR's content) under ``out/report/cache`` (with
+linear sRGB images for the contact sheet), so the map is completed in pieces and rebuilt without
+recomputation; rows of an earlier :data:`CACHE_VERSION` or against a re-rendered truth are
+measured again.
 """
 
 from __future__ import annotations
@@ -219,10 +220,11 @@ def _summary(found: dict) -> dict:
             "per_view_s": found["per_view_s"], "lookup_s": found["lookup_s_per_direction"]}
 
 
-def cache_path(cache_dir: str, entry: Entry, sky: MapSky) -> str:
-    """The cached row of ``entry`` on ``sky``; an entry that reads a coefficient table is keyed
-    by the table's content too, so a refitted table is measured again."""
-    tag = f"v{CACHE_VERSION}__{entry.key}__{sky.name}"
+def cache_path(cache_dir: str, entry: Entry, sky: MapSky, truth_path: str) -> str:
+    """The cached row of ``entry`` on ``sky`` against the ground truth in ``truth_path``, keyed by
+    that EXR's content (a re-rendered truth is measured against again) and, for an entry that
+    reads a coefficient table, by the table's content (a refitted table is measured again)."""
+    tag = f"v{CACHE_VERSION}__{entry.key}__{sky.name}__{sha256_of(truth_path)[:12]}"
     if "table" in entry.options:
         tag += "__" + sha256_of(entry.options["table"])[:12]
     safe = "".join(ch if ch.isalnum() else "_" for ch in tag)
@@ -259,7 +261,7 @@ def evaluate_map(entries, skies, cache_dir: str, log=print) -> list[dict]:
         order = sorted(range(len(skies)), key=lambda i: skies[i][0].atmosphere)
         for sky_index in order:
             sky, path = skies[sky_index]
-            cached = cache_path(cache_dir, entry, sky)
+            cached = cache_path(cache_dir, entry, sky, path)
             if os.path.exists(cached):
                 rows[entry.key, sky_index] = load_cached(cached)[0]
                 continue
