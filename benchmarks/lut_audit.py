@@ -45,7 +45,7 @@ from results_files import machine  # noqa: E402
 from skyref.audit.audit import compare  # noqa: E402
 from skyref.batch.provenance import describe_truth, truth_provenance  # noqa: E402
 from skyref.batch import load_grid, run_batch  # noqa: E402
-from skyref.batch.merge import export_skies, import_skies  # noqa: E402
+from skyref.batch.merge import LUT_AUDIT_TRUTH, export_skies, import_skies  # noqa: E402
 from skyref.io.atomic import atomic_path, atomic_write  # noqa: E402
 from skyref.io.exr import read_sky_exr  # noqa: E402
 from skyref.lut import METHODS, lut_method  # noqa: E402
@@ -54,7 +54,7 @@ ROOT = os.path.normpath(os.path.join(os.path.dirname(os.path.abspath(__file__)),
 GRID = os.path.join(ROOT, "grids", "lut_audit.toml")
 RESULTS = os.path.join(ROOT, "results")
 #: The grid's finished skies, shipped in the repository (see the module docstring).
-SHIPPED_TRUTH = os.path.join(RESULTS, "lut_audit", "truth")
+SHIPPED_TRUTH = os.path.join(ROOT, LUT_AUDIT_TRUTH)
 
 #: Bruneton 2017 on hazy skies, two mechanisms (issue 15): (A) 50 uniform steps along 300-900 km
 #: horizon rays against a 1.2 km aerosol scale height; (B) 32 mu_s cells against the aerosol's

@@ -29,7 +29,7 @@ from skyref.audit.advise import advice_lines, load_map, parse_tolerance
 from skyref.audit.speed_map import (ENTRIES, TRUTH_GRID, entry_summary, evaluate_map, fitted_entries, map_sky_specs,
                                     truth_skies)
 from skyref.batch import load_grid, run_batch
-from skyref.batch.merge import import_skies
+from skyref.batch.merge import LUT_AUDIT_TRUTH, import_skies
 from skyref.batch.store import BatchStore
 from skyref.envmap import (DEFAULT_WIDTH, ORIENTATIONS, SUN_MODES, check_width, render_environment_map, snippet_path,
                            write_environment_map)
@@ -291,6 +291,12 @@ def cmd_report(args) -> int:
 
     grid = load_grid(args.truth_grid)
     log = (lambda *_: None) if args.quiet else print
+    # the truth that ships with the repository first: its skies cost hours each to render
+    source = args.truth_from
+    if source is None and args.truth_grid == TRUTH_GRID and os.path.isdir(LUT_AUDIT_TRUTH):
+        source = LUT_AUDIT_TRUTH
+    if source is not None:
+        import_skies(grid, source, log=log, parameter="--truth-from")
     # the map's skies alone: the rest of the truth grid is the LUT audit's (hours more)
     specs = map_sky_specs(grid)
     run_batch(grid, log=log, indices=[spec.index for _, spec in specs])
@@ -440,6 +446,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("report", help="the speed-vs-error map of every method: results/README.md, plots, map.json")
     p.add_argument("--truth-grid", default=TRUTH_GRID, help="grid of the ground-truth skies")
+    p.add_argument("--truth-from", help="finished truth skies to import first, rendered elsewhere (default, with the "
+                   f"default grid: {LUT_AUDIT_TRUTH}, the truth shipped with the repository, if present)")
     p.add_argument("--coefficients", default=skyref_fit_directory(),
                    help="directory of fitted Hosek-Wilkie / Perez tables ('skyref fit --out'), included if present "
                    "(default: the fit shipped with skyref, skyref/analytic/data/skyref_fit)")

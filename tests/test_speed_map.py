@@ -287,3 +287,41 @@ def test_every_map_sky_is_found_on_the_truth_grid():
         assert spec.coordinates["atmosphere"] == grid.axes["atmosphere"][sky.atmosphere]
     assert [path for _, path in truth_skies(grid)] == [
         os.path.join(grid.output.directory, "skies", f"{spec.sky_id}.exr") for _, spec in found]
+
+
+def test_report_takes_the_shipped_truth_instead_of_rendering_it(tmp_path, monkeypatch):
+    """On a fresh clone, ``skyref report`` imports the map skies from the truth that ships in
+    results/lut_audit/truth (hours of rendering each) and renders none of them."""
+    import shutil
+
+    import skyref.audit.map_report as map_report
+    import skyref.cli as cli
+    from skyref.audit.speed_map import MAP_SKIES, map_sky_specs
+    from skyref.batch import load_grid
+    from skyref.batch.merge import LUT_AUDIT_TRUTH
+    from skyref.batch.store import BatchStore
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    clone = tmp_path / "clone"
+    for folder in ("grids", "scenes"):
+        shutil.copytree(os.path.join(root, folder), clone / folder)
+    shipped, piece = os.path.join(root, LUT_AUDIT_TRUTH), clone / LUT_AUDIT_TRUTH
+    for folder in ("skies", "markers"):
+        (piece / folder).mkdir(parents=True)
+    shutil.copy(os.path.join(shipped, "grid.json"), piece / "grid.json")
+    specs = map_sky_specs(load_grid(os.path.join(root, "grids", "lut_audit.toml")))
+    for _, spec in specs:   # the map's skies alone: the piece is what a clone holds of them
+        shutil.copy(os.path.join(shipped, "skies", f"{spec.sky_id}.exr"), piece / "skies")
+        shutil.copy(os.path.join(shipped, "markers", f"{spec.sky_id}.json"), piece / "markers")
+    monkeypatch.chdir(clone)
+    unfinished = []
+
+    def run_batch(grid, log, indices):
+        unfinished.extend(i for i in indices if not BatchStore(grid).is_finished(grid.sky_id(i)))
+
+    monkeypatch.setattr(cli, "run_batch", run_batch)
+    monkeypatch.setattr(cli, "evaluate_map", lambda entries, skies, cache, log: [])
+    monkeypatch.setattr(cli, "entry_summary", lambda rows: {})
+    monkeypatch.setattr(map_report, "write_map_report", lambda *args: "results/README.md")
+    assert cli.main(["report", "-q"]) == 0
+    assert len(specs) == len(MAP_SKIES) and unfinished == []

@@ -413,8 +413,9 @@ def write_map_report(entries, skies, rows, summaries, cache_dir: str, results_di
     lines = [
         "# skyref results", "",
         f"Regenerate this page with `skyref report` (rebuilt {datetime.date.today()} on {machine}). "
-        "It reads the ground truth of `grids/lut_audit.toml` (rendered first if missing, resumable) and "
-        "caches every (method, sky) comparison under `out/report/cache`.", "",
+        "It reads the ground truth of `grids/lut_audit.toml` (imported from `results/lut_audit/truth`, where it "
+        "ships; what is missing is rendered first, resumable) and caches every (method, sky) comparison under "
+        "`out/report/cache`.", "",
         "## Speed against error, every method", "",
         f"Skies: {len(MAP_SKIES)} of the standard grid — "
         + "; ".join(f"{s.kind}: {s.name}" for s in MAP_SKIES)

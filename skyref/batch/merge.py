@@ -24,7 +24,11 @@ from skyref.errors import ParameterError
 from skyref.io.atomic import atomic_path, atomic_write
 from skyref.io.exr import read_sky_exr
 
-__all__ = ["import_skies", "export_skies"]
+__all__ = ["LUT_AUDIT_TRUTH", "import_skies", "export_skies"]
+
+#: Where the finished skies of ``grids/lut_audit.toml`` ship, relative to the repository root:
+#: a piece :func:`import_skies` takes (written by ``benchmarks/lut_audit.py --part ship``).
+LUT_AUDIT_TRUTH = os.path.join("results", "lut_audit", "truth")
 
 
 def import_skies(grid, source, log=print, parameter: str = "source") -> dict:
