@@ -46,6 +46,7 @@ from skyref.audit.audit import compare  # noqa: E402
 from skyref.batch.provenance import describe_truth, truth_provenance  # noqa: E402
 from skyref.batch import load_grid, run_batch  # noqa: E402
 from skyref.batch.merge import LUT_AUDIT_TRUTH, export_skies, import_skies  # noqa: E402
+from skyref.batch.store import BatchStore  # noqa: E402
 from skyref.io.atomic import atomic_path, atomic_write  # noqa: E402
 from skyref.io.exr import read_sky_exr  # noqa: E402
 from skyref.lut import METHODS, lut_method  # noqa: E402
@@ -116,8 +117,9 @@ def truth_skies(grid, directory):
 
 
 def rendered_skies(grid, directory):
-    """:func:`truth_skies` whose ground truth has been rendered."""
-    return [sky for sky in truth_skies(grid, directory) if os.path.exists(sky[2])]
+    """:func:`truth_skies` whose ground truth is finished (its marker written, after its EXR)."""
+    store = BatchStore(grid, directory=directory)
+    return [sky for sky in truth_skies(grid, directory) if store.is_finished(grid.sky_id(sky[0]))]
 
 
 def evaluate(name, options, skies, log, derive=None, built=None):
