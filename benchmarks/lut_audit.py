@@ -23,7 +23,12 @@ part's numbers are kept in results/lut_audit/<part>_<method>.json and the report
 every JSON present, so a long audit can be completed in pieces. ``--rendered-only`` audits the
 grid on the skies whose ground truth is already rendered and renders nothing (the report says how
 many of each atmosphere's skies its rows cover), so a truth that takes days to render is audited
-as it grows. Writes results/lut_audit.md, results/lut_audit.csv and results/lut_audit/*.png.
+as it grows. ``--part polarized``: every method at the papers' settings against the polarized
+truth's I as well, made from each scalar truth sky plus the change polarized transport makes,
+rendered for it with the two transports on the same paths
+(:func:`skyref.audit.groundtruth.with_polarization`; ``POLARIZATION_SPP`` samples per direction,
+kept in out/lut-audit-polarization). Writes results/lut_audit.md, results/lut_audit.csv and
+results/lut_audit/*.png.
 """
 
 from __future__ import annotations
@@ -43,6 +48,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 from results_files import machine  # noqa: E402
 
 from skyref.audit.audit import compare  # noqa: E402
+from skyref.audit.groundtruth import polarization_change, with_polarization  # noqa: E402
 from skyref.batch.provenance import describe_truth, truth_provenance  # noqa: E402
 from skyref.batch import load_grid, run_batch  # noqa: E402
 from skyref.batch.merge import LUT_AUDIT_TRUTH, export_skies, import_skies  # noqa: E402
@@ -56,6 +62,12 @@ GRID = os.path.join(ROOT, "grids", "lut_audit.toml")
 RESULTS = os.path.join(ROOT, "results")
 #: The grid's finished skies, shipped in the repository (see the module docstring).
 SHIPPED_TRUTH = os.path.join(ROOT, LUT_AUDIT_TRUTH)
+#: The polarization change of each truth sky (:func:`polarization_change`): samples per
+#: direction, seeds (above any the batch uses, clear of benchmarks/truth_check.py's) and where the
+#: changes are kept (one .npz per sky, reused by later runs).
+POLARIZATION_SPP = 2048
+POLARIZATION_SEEDS = (1 << 30) + (1 << 20)
+POLARIZATION_DIR = os.path.join(ROOT, "out", "lut-audit-polarization")
 
 #: Bruneton 2017 on hazy skies, two mechanisms (issue 15): (A) 50 uniform steps along 300-900 km
 #: horizon rays against a 1.2 km aerosol scale height; (B) 32 mu_s cells against the aerosol's
@@ -63,6 +75,9 @@ SHIPPED_TRUTH = os.path.join(ROOT, LUT_AUDIT_TRUTH)
 MECHANISM_A = "500 samples along rays (hazy)"
 MECHANISM_B = "mu_s 128 (hazy)"
 MECHANISMS_AB = "mu_s 128, 500 samples along rays (hazy)"
+
+#: The grid's atmospheres (its ``atmosphere`` axis, in order) in the report's words.
+ATMOSPHERE_LABELS = ("bruneton2017 clear", "bruneton2017 T=6", "hillaire2020 clear", "hillaire2020 T=6")
 
 #: Regions whose errors the sweeps report (skyref.audit.regions), with their column titles.
 SWEEP_REGIONS = (("sky", "sky"), ("horizon", "horizon"), ("sun", "sun"), ("antisolar", "anti-solar"))
@@ -122,16 +137,16 @@ def rendered_skies(grid, directory):
     return [sky for sky in truth_skies(grid, directory) if store.is_finished(grid.sky_id(sky[0]))]
 
 
-def evaluate(name, options, skies, log, derive=None, built=None):
+def evaluate(name, options, skies, log, derive=None, built=None, truth_of=read_sky_exr):
     """Audit method ``name`` with ``options`` on ``skies`` (list of (index, coordinates, path)),
     building it once per atmosphere; with ``derive``, audit ``derive(method)`` instead, and keep
-    the built methods in the dict ``built`` (atmosphere key -> method) for reuse. Returns one row
-    per sky."""
+    the built methods in the dict ``built`` (atmosphere key -> method) for reuse; ``truth_of``:
+    the truth Sky of a sky's EXR path. Returns one row per sky."""
     rows = []
     built = {} if built is None else built
     method, atmosphere_key = None, None
     for index, coordinates, path in skies:
-        truth = read_sky_exr(path)
+        truth = truth_of(path)
         scene = truth.scene
         key = json.dumps(scene.atmosphere.to_dict(), sort_keys=True)
         if key != atmosphere_key:
@@ -149,6 +164,89 @@ def evaluate(name, options, skies, log, derive=None, built=None):
                      "lookup_ns": 1e9 * found["lookup_s_per_direction"],
                      "truth_spp": truth.metadata.get("spp"), "statistics": found["statistics"]})
     return rows
+
+
+def polarization_path(path) -> str:
+    """Where the polarization change of the truth sky in the EXR ``path`` is kept."""
+    return os.path.join(POLARIZATION_DIR, os.path.basename(path).replace(".exr", f"-{POLARIZATION_SPP}spp.npz"))
+
+
+def render_polarization_changes(skies, log) -> None:
+    """The :func:`polarization_change` of each of ``skies`` ((index, coordinates, path)) that has
+    none kept yet, rendered along the truth's own scene with POLARIZATION_SEEDS + index."""
+    os.makedirs(POLARIZATION_DIR, exist_ok=True)
+    for index, _, path in skies:
+        target = polarization_path(path)
+        if os.path.exists(target):
+            continue
+        scene = read_sky_exr(path).scene
+        change, change_error, cpu_s = polarization_change(scene, POLARIZATION_SPP, POLARIZATION_SEEDS + index)
+        with atomic_path(target) as tmp, open(tmp, "wb") as f:
+            np.savez(f, change=change, change_error=change_error, cpu_s=cpu_s,
+                     scene=json.dumps(scene.to_dict(), sort_keys=True))
+        log(f"  polarization change of {os.path.basename(path)}: {cpu_s:.0f} CPU s")
+
+
+def polarized_truth(path):
+    """The polarized truth's I of the truth sky in the EXR ``path`` (:func:`with_polarization`),
+    checked to be the change of that sky's scene."""
+    truth = read_sky_exr(path)
+    with np.load(polarization_path(path)) as kept:
+        if str(kept["scene"]) != json.dumps(truth.scene.to_dict(), sort_keys=True):
+            sys.exit(f"{polarization_path(path)} is the polarization change of another scene than {path}: "
+                     "delete it and rerun --part polarized")
+        return with_polarization(truth, kept["change"], kept["change_error"])
+
+
+def evaluate_polarized(name, skies, log):
+    """:func:`evaluate` of method ``name`` at the papers' settings against the polarized truth
+    of ``skies``, each row with the CPU seconds of its sky's polarization change."""
+    rows = evaluate(name, {}, skies, log, truth_of=polarized_truth)
+    for row, (_, _, path) in zip(rows, skies):
+        with np.load(polarization_path(path)) as kept:
+            row["polarization_cpu_s"] = float(kept["cpu_s"])
+    return rows
+
+
+def polarized_table(grid, rows_by_method, polarized_by_method) -> list:
+    """Each method's error against the scalar truth beside its error against the polarized
+    truth's I, on the same skies, per atmosphere."""
+    if not polarized_by_method:
+        return []
+    atmospheres = grid.axes["atmosphere"]
+    labels = ATMOSPHERE_LABELS
+    first = next(iter(polarized_by_method.values()))
+    lines = ["## Against the polarized truth", "",
+             "The LUT methods transport scalar radiance; the trusted reference codes transport Stokes vectors, and "
+             "multiple scattering of polarized light changes the radiance itself. Here each method's error against "
+             "the scalar truth (left) and against the polarized truth's I (right), on the same skies: median over "
+             "them (worst in parentheses), luminance RMS in %, noise-corrected. The polarized "
+             "truth is each scalar truth sky plus the change polarized transport makes in it (Rayleigh phase matrix, "
+             "depolarization 0 as the presets publish it; the aerosol's phase function scalar), rendered with the "
+             f"two transports along the same paths, {POLARIZATION_SPP:,} samples per direction "
+             f"({sum(r['polarization_cpu_s'] for r in first) / 3600.0:.2f} CPU hours for {len(first)} skies); "
+             "their standard errors add in quadrature.", "",
+             "| method | atmosphere | skies | sky RMS | horizon RMS | sun RMS | anti-solar RMS |",
+             "|---|---|---:|---:|---:|---:|---:|"]
+    for name, polarized_rows in polarized_by_method.items():
+        scalar_rows = {r["index"]: r for r in rows_by_method.get(name, [])}
+        for a, label in enumerate(labels):
+            pol = [r for r in polarized_rows if r["coordinates"]["atmosphere"] == atmospheres[a]
+                   and r["index"] in scalar_rows]
+            if not pol:
+                continue
+            sca = [scalar_rows[r["index"]] for r in pol]
+
+            def pair(region):
+                medians = [_median(rows, region, "luminance", "rms") for rows in (sca, pol)]
+                if not np.all(np.isfinite(medians)):
+                    return "–"
+                return " / ".join(f"{100 * median:.1f} ({100 * _worst(rows, region, 'luminance', 'rms'):.0f})"
+                                  for median, rows in zip(medians, (sca, pol)))
+
+            lines.append(f"| {name} | {label} | {len(pol)} | {pair('sky')} | {pair('horizon')} | {pair('sun')} "
+                         f"| {pair('antisolar')} |")
+    return lines + [""]
 
 
 def _cell(stats, region="sky", metric="luminance", stat="rms"):
@@ -174,7 +272,7 @@ def grid_tables(grid, rows_by_method):
     atmospheres = grid.axes["atmosphere"]
     observers = grid.axes["observer.altitude_m"]
     suns = grid.axes["sun.zenith_deg"]
-    labels = ["bruneton2017 clear", "bruneton2017 T=6", "hillaire2020 clear", "hillaire2020 T=6"]
+    labels = ATMOSPHERE_LABELS
     lines = ["## Summary (papers' default settings)", "",
              "Median over the skies of each atmosphere (worst sky in parentheses); luminance errors in %, "
              "RMS noise-corrected; CIEDE2000 absolute. Regions: sky = every view that misses the ground; "
@@ -346,7 +444,7 @@ def _load(part):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--part", choices=("all", "grid", "sweeps", "report", "ship"), default="all")
+    parser.add_argument("--part", choices=("all", "grid", "sweeps", "polarized", "report", "ship"), default="all")
     parser.add_argument("--methods", nargs="*", default=list(METHODS))
     parser.add_argument("--rendered-only", action="store_true",
                         help="render nothing; audit the grid on the skies already rendered (the sweeps still "
@@ -380,6 +478,13 @@ def main():
         if args.part in ("all", "sweeps"):
             log(f"{name}: sweeps")
             _save("sweeps", name, sweep(grid, directory, name, log))
+    if args.part in ("all", "polarized"):
+        skies = rendered_skies(grid, directory)
+        log(f"polarization changes of {len(skies)} skies")
+        render_polarization_changes(skies, log)
+        for name in args.methods:
+            log(f"{name}: against the polarized truth")
+            _save("polarized", name, evaluate_polarized(name, skies, log))
     write_report(grid)
 
 
@@ -408,7 +513,8 @@ def write_report(grid):
              "Method notes: each method's module docstring (skyref/lut/*.py) states what its paper leaves open "
              "and what was chosen. Per view: the tables a frame rebuilds when the observer or sun moves "
              "(Hillaire's sky view, Elek's aerial-perspective volume).", "",
-             *grid_tables(grid, rows_by_method), "![error vs sun zenith](lut_audit/error_vs_sun.png)", ""]
+             *grid_tables(grid, rows_by_method), "![error vs sun zenith](lut_audit/error_vs_sun.png)", "",
+             *polarized_table(grid, rows_by_method, _load("polarized"))]
     if points:
         lines += ["## Sweeps: speed against error", "",
                   "Bruneton 2017's atmosphere, clear unless marked (hazy): turbidity 6; observer 0 and 10 km, sun "

@@ -325,3 +325,30 @@ def test_a_paired_render_measures_the_polarized_change_of_i_with_its_own_error_b
     scalar, polarized, paired_error = pairs[0]
     as_if_independent = np.hypot(scalar.standard_error, polarized.standard_error)
     assert np.median(paired_error / as_if_independent) < 0.5, np.median(paired_error / as_if_independent)
+
+
+def test_a_scalar_truth_plus_the_paired_change_is_the_polarized_truth(mi):
+    """The LUT audit's polarized truth (skyref.audit.groundtruth.with_polarization): a scalar
+    render plus the paired polarization change of other seeds, against a polarized render of its
+    own. Value by value within the combined standard errors (mean z^2 near 1), while the scalar
+    render alone is many standard errors off the polarized one (the test can fail)."""
+    from skyref.atmosphere import bruneton2017
+    from skyref.audit.groundtruth import polarization_change, with_polarization
+    from skyref.scene import Sun
+
+    scene = Scene(atmosphere=bruneton2017(), sun=Sun(zenith_deg=40.0), camera=Camera(width=8, height=4),
+                  wavelengths="rgb", render=RenderSettings(passes=16, pixel_sampling="centre", estimator="line_integral"))
+    polarized_scene = scene.replace(render=RenderSettings(passes=16, pixel_sampling="centre",
+                                                          estimator="line_integral", polarized=True))
+    truth = render_sky(scene, spp=16384, seed=11, symmetry=False)
+    change, change_error, cpu_s = polarization_change(scene, spp=4096, seed=12)
+    composed = with_polarization(truth, change, change_error)
+    direct = render_sky(polarized_scene, spp=16384, seed=13, symmetry=False)
+    lit = truth.radiance > 0.0
+    z = ((composed.radiance - direct.radiance) / np.hypot(composed.standard_error, direct.standard_error))[lit]
+    z_scalar = ((truth.radiance - direct.radiance) / np.hypot(truth.standard_error, direct.standard_error))[lit]
+    assert z.size > 60 and np.all(np.isfinite(z))
+    assert 0.4 < np.mean(z ** 2) < 1.9, np.mean(z ** 2)
+    assert np.mean(z_scalar ** 2) > 10.0, np.mean(z_scalar ** 2)
+    np.testing.assert_allclose(composed.standard_error, np.hypot(truth.standard_error, change_error))
+    assert cpu_s > 0.0 and set(composed.orders) <= {"sun_direct"}
