@@ -214,7 +214,6 @@ def polarized_table(grid, rows_by_method, polarized_by_method) -> list:
     if not polarized_by_method:
         return []
     atmospheres = grid.axes["atmosphere"]
-    labels = ATMOSPHERE_LABELS
     first = next(iter(polarized_by_method.values()))
     lines = ["## Against the polarized truth", "",
              "The LUT methods transport scalar radiance; the trusted reference codes transport Stokes vectors, and "
@@ -230,7 +229,7 @@ def polarized_table(grid, rows_by_method, polarized_by_method) -> list:
              "|---|---|---:|---:|---:|---:|---:|"]
     for name, polarized_rows in polarized_by_method.items():
         scalar_rows = {r["index"]: r for r in rows_by_method.get(name, [])}
-        for a, label in enumerate(labels):
+        for a, label in enumerate(ATMOSPHERE_LABELS):
             pol = [r for r in polarized_rows if r["coordinates"]["atmosphere"] == atmospheres[a]
                    and r["index"] in scalar_rows]
             if not pol:
@@ -272,7 +271,6 @@ def grid_tables(grid, rows_by_method):
     atmospheres = grid.axes["atmosphere"]
     observers = grid.axes["observer.altitude_m"]
     suns = grid.axes["sun.zenith_deg"]
-    labels = ATMOSPHERE_LABELS
     lines = ["## Summary (papers' default settings)", "",
              "Median over the skies of each atmosphere (worst sky in parentheses); luminance errors in %, "
              "RMS noise-corrected; CIEDE2000 absolute. Regions: sky = every view that misses the ground; "
@@ -283,7 +281,7 @@ def grid_tables(grid, rows_by_method):
              "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     per_atmosphere = len(observers) * len(suns)
     for name, rows in rows_by_method.items():
-        for a, label in enumerate(labels):
+        for a, label in enumerate(ATMOSPHERE_LABELS):
             sub = [r for r in rows if r["coordinates"]["atmosphere"] == atmospheres[a]]
             if not sub:
                 continue
@@ -303,7 +301,7 @@ def grid_tables(grid, rows_by_method):
               "pixels (from 1000 km no pixel centre of the 64x32 grid falls on the limb); blank: the sky's ground "
               "truth is not rendered yet.", ""]
     for name, rows in rows_by_method.items():
-        for a, label in enumerate(labels):
+        for a, label in enumerate(ATMOSPHERE_LABELS):
             lookup = {(r["coordinates"]["observer.altitude_m"], r["coordinates"]["sun.zenith_deg"]): r
                       for r in rows if r["coordinates"]["atmosphere"] == atmospheres[a]}
             if not lookup:
@@ -467,8 +465,8 @@ def main():
             needed = sweep_indices(grid, directory) if args.part in ("all", "sweeps") else []
         else:
             run_batch(grid, log=log, indices=needed)
-        missing = [index for index, _, path in truth_skies(grid, directory)
-                   if index in needed and not os.path.exists(path)]
+        rendered = {index for index, _, _ in rendered_skies(grid, directory)}
+        missing = [index for index in needed if index not in rendered]
         if missing:
             sys.exit(f"ground truth incomplete: {len(missing)} of {len(needed)} skies missing; rerun to resume")
     for name in args.methods:
