@@ -69,7 +69,7 @@ def test_new_sample_counts_reuse_the_compiled_path_kernels(mi, estimator):
     single-scattering launch, a scatter left pending fused into it: 2 and 9 samples per
     direction compiled it twice; one direction alone, its one-entry table read as a scalar,
     compiled both path kernels again.) Both turbidities are above the ground guide's switch
-    (``GROUND_GUIDE_FORWARD_SHARE``, about turbidity 2.5), which compiles a second variant of the
+    (``HAZY_FORWARD_SHARE``, about turbidity 2.5), which compiles a second variant of the
     line integral's path kernel on purpose."""
     import drjit as dr
 

@@ -5,7 +5,7 @@ for the planet: the ground and the top of the atmosphere are analytic spheres, o
 observer-centred frame, see :mod:`skyref.plugins.geometry`).
 
 Two independent estimators (``estimator``): ``line_integral``, the default
-(:mod:`skyref.plugins.line_integral`; 8-70x less CPU to a given error, but kernels that compile
+(:mod:`skyref.plugins.line_integral`; 8-72x less CPU to a given error, but kernels that compile
 for 15 s to minutes per new configuration), and ``delta_tracking``, the baseline described
 below, which the tests compare it against. The line integral computes single scattering by
 quadrature along the camera ray, the sun's optical depth from a table, and forced collisions,
@@ -206,7 +206,7 @@ SUN_LOBE_PROBABILITY = 0.2
 
 #: Probability with which a line-integral path leaving the Lambertian ground draws its direction
 #: from the guide rather than by the cosine (one-sample MIS, balance heuristic), where the
-#: atmosphere's forward-peaked constituents carry at least ``GROUND_GUIDE_FORWARD_SHARE`` of its
+#: atmosphere's forward-peaked constituents carry at least ``HAZY_FORWARD_SHARE`` of its
 #: column's scattering (hazy air) and the ground reflects. There the ground's diffuse light comes
 #: largely from the aureole around the sun, which a cosine-drawn direction rarely meets: on the
 #: LUT audit's hazy skies (turbidity 6, albedo 0.1) the cosine's single-direction relative
@@ -222,8 +222,10 @@ SUN_LOBE_PROBABILITY = 0.2
 GROUND_GUIDE_PROBABILITY = 0.3
 
 #: Least share of a column's scattering optical depth (at the guide's wavelengths) carried by
-#: forward-peaked constituents for :data:`GROUND_GUIDE_PROBABILITY` to apply.
-GROUND_GUIDE_FORWARD_SHARE = 0.5
+#: forward-peaked constituents for its air to count as hazy (turbidity 2.5 and up; the clear
+#: presets' aerosol carries 3-5%): :data:`GROUND_GUIDE_PROBABILITY` applies and paths resample
+#: among :data:`RESAMPLED_DIRECTIONS_HAZY` candidates.
+HAZY_FORWARD_SHARE = 0.5
 
 #: Probability with which a line-integral path draws its direction from the single-scattering
 #: guide (:mod:`skyref.plugins.guiding`) where Rayleigh scattering is all of the local scattering
@@ -253,19 +255,29 @@ GUIDED_PATH_PRIOR = 0.5
 #: of orders >= 2 at 440 nm 7.4 -> 11.8 at the zenith, 10.4 -> 12.7 at the horizon.
 TWILIGHT_GUIDED_PATH_PRIOR = 1.0
 
-#: Candidate directions per scattering event of a line-integral path, resampled by phase function
-#: x guide density (:meth:`AtmosphereIntegrator._scatter_direction`), with the guide's table
-#: holding multiply scattered light from a pilot (:mod:`skyref.plugins.guiding`). Measured
-#: 2026-12-05 against one direction and the single-scattering guide, per-sample variance of the
-#: radiance (6 views, RGB unless said; summed worst channel of the views, what an adaptive
-#: render pays), CPU per path: hazy sky (turbidity 6, sun zenith 60), three seeds: 7.07 / 6.66 /
-#: 5.74 -> 3.99 / 3.63 / 3.32, +32% CPU; turbidity 6, albedo 1, sun 88.6, 21 wavelengths: 17.9 ->
-#: 12.1 (mean over channels 1.38 -> 0.69) at the same CPU; sunset (sun 88) 0.83 -> 0.44, +17%;
-#: clear (sun 60) 0.13 -> 0.11 (mean 0.020 -> 0.013), +31%. 4 candidates: 4.95 against 3.63 on the
-#: hazy sky, 16: no better than 8. At twilight it was worse (28.9 -> 40.3): there the light of
-#: every order comes from the lit air the single-scattering guide aims at, and paths keep one
-#: direction from the guided mixture.
-RESAMPLED_DIRECTIONS = 8
+#: Candidate directions per scattering event of a line-integral path in hazy air (the column's
+#: forward-peaked share at least ``HAZY_FORWARD_SHARE``), resampled by phase function x guide
+#: density (:meth:`AtmosphereIntegrator._scatter_direction`), with the guide's table holding
+#: multiply scattered light from a pilot (:mod:`skyref.plugins.guiding`). Measured 2026-12-05
+#: against one direction and the single-scattering guide, per-sample variance of the radiance (6
+#: views, RGB unless said; summed worst channel of the views, what an adaptive render pays), CPU
+#: per path: hazy sky (turbidity 6, sun zenith 60), three seeds: 7.07 / 6.66 / 5.74 -> 3.99 / 3.63
+#: / 3.32, +32% CPU; turbidity 6, albedo 1, sun 88.6, 21 wavelengths: 17.9 -> 12.1 (mean over
+#: channels 1.38 -> 0.69) at the same CPU; sunset (sun 88) 0.83 -> 0.44, +17%; clear (sun 60) 0.13
+#: -> 0.11 (mean 0.020 -> 0.013), +31%. 4 candidates: 4.95 against 3.63 on the hazy sky, 16: no
+#: better than 8. At twilight it was worse (28.9 -> 40.3): there the light of every order comes
+#: from the lit air the single-scattering guide aims at, and paths keep one direction from the
+#: guided mixture.
+RESAMPLED_DIRECTIONS_HAZY = 8
+
+#: Candidate directions where Rayleigh scattering carries most of the column's (clear air, the
+#: sunset; not at twilight). Its paths are short and cheap, so 8 candidates cost more than they
+#: save. Measured 2026-12-07 on `results/groundtruth_speed.md`'s skies (128 x 64 pixel centres, 1024
+#: samples each, CPU to 1% relative RMS over the sky, two seeds, the batch niced beside it), 8 ->
+#: 4 candidates: clear RGB 3.58 -> 2.95 CPU s (1.21x), 17 wavelengths 6.66 -> 5.44 (1.22x), sunset
+#: RGB 6.72 -> 5.83 (1.15x); 2 candidates 2.91 (clear) and 6.22 (sunset), one 3.43 (clear). The
+#: hazy sky there was within 1.07x either way (79.3 against 84.6 s), the 6 views above favour 8.
+RESAMPLED_DIRECTIONS = 4
 
 #: The resampling target's uniform part: phase function x (guide density + this / 4 pi); the
 #: guide's density integrates to 1 over the sphere. With the single-scattering guide alone (no
@@ -508,7 +520,8 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         #: traced by the delta-tracking estimator (the line integral assumes open sky).
         self.objects = None
         #: Candidate directions per scattering event of a line-integral path
-        #: (:meth:`_scatter_direction`): ``RESAMPLED_DIRECTIONS``, 1 at twilight.
+        #: (:meth:`_scatter_direction`): ``RESAMPLED_DIRECTIONS`` (``_HAZY`` in hazy air), 1 at
+        #: twilight.
         self.resampled_directions = 1
         #: Whether a line-integral path leaving the ground may draw its direction from the guide
         #: (:meth:`_reflect_direction`).
@@ -523,12 +536,12 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             # needs no guide: 0.3 s of CPU and, per atmosphere, a compile of 20-55 s saved)
             self.guide = (ScatteredLightGuide(self.line, self.geometry, self.sun, self.wavelengths_nm)
                           if self.max_depth > 1 else None)
+            hazy = self._forward_scattering_share(atmosphere) >= HAZY_FORWARD_SHARE
             if self.guide is not None and not self.twilight:
                 self._guide_multiple_scattering()
-                self.resampled_directions = RESAMPLED_DIRECTIONS
+                self.resampled_directions = RESAMPLED_DIRECTIONS_HAZY if hazy else RESAMPLED_DIRECTIONS
             reflects = bool(np.any(atmosphere.ground_albedo(self.wavelengths_nm) > 0.0))
-            self.ground_guided = (self.guide is not None and reflects
-                                  and self._forward_scattering_share(atmosphere) >= GROUND_GUIDE_FORWARD_SHARE)
+            self.ground_guided = self.guide is not None and reflects and hazy
 
     def _guide_multiple_scattering(self):
         """The guide's pilot (:mod:`skyref.plugins.guiding`): orders >= 2 traced from its layers
