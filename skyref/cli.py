@@ -29,6 +29,7 @@ from skyref.audit.advise import advice_lines, load_map, parse_tolerance
 from skyref.audit.speed_map import (ENTRIES, TRUTH_GRID, entry_summary, evaluate_map, fitted_entries, map_sky_specs,
                                     truth_skies)
 from skyref.batch import load_grid, run_batch
+from skyref.batch.forecast import coordinates_text, forecast_skies
 from skyref.batch.merge import LUT_AUDIT_TRUTH, import_skies
 from skyref.batch.store import BatchStore
 from skyref.envmap import (DEFAULT_WIDTH, ORIENTATIONS, SUN_MODES, check_width, render_environment_map, snippet_path,
@@ -186,12 +187,38 @@ def batch_progress_line(grid, indices=None) -> str:
     return line + "".join(f"\n  {sky_id}: {note}" for sky_id, note in partial.items())
 
 
+def forecast_batch(grid, indices, pilot_spp: int, variant) -> int:
+    """``skyref batch --forecast``: each unfinished sky's forecast CPU time
+    (:mod:`skyref.batch.forecast`), one line per sky as its pilot ends, then the total."""
+    check_int("--pilot-spp", pilot_spp, grid.output.passes, 1 << 20)
+    grid.validate()
+    forecasts = forecast_skies(grid, indices, pilot_spp, variant)
+    print(f"{grid.source or 'grid'}: forecast of the skies still to render, from a pilot of {pilot_spp:,} samples "
+          f"per view each (the pilot's CPU is in brackets; compiling is not counted)", flush=True)
+    skies, cpu_s, pilot_cpu_s = 0, 0.0, 0.0
+    for spec, forecast in forecasts:
+        skies, cpu_s, pilot_cpu_s = skies + 1, cpu_s + forecast["cpu_s"], pilot_cpu_s + forecast["pilot_cpu_s"]
+        print(f"  {spec.sky_id} ({coordinates_text(spec.coordinates)}): {forecast['cpu_s']:,.0f} CPU s "
+              f"[{forecast['pilot_cpu_s']:,.0f}], {forecast['views']:,} views x {forecast['samples_per_view']:,.0f} "
+              f"samples, {forecast['views_short']} left above the target", flush=True)
+    print(f"{skies} skies to render: {cpu_s / 3600.0:.2f} CPU hours forecast (the pilots took "
+          f"{pilot_cpu_s / 3600.0:.2f}); a heavy tail the pilots did not draw makes them dearer")
+    return 0
+
+
 def cmd_batch(args) -> int:
     grid = load_grid(args.grid)
     indices = grid.sky_numbers(args.skies) if args.skies is not None else None
     if indices is not None and args.import_from:
         raise ParameterError("--skies", args.skies, "without --import-from (an import takes every sky finished there)",
                              "both given")
+    if args.pilot_spp is not None and not args.forecast:
+        raise ParameterError("--pilot-spp", args.pilot_spp, "only with --forecast", "nothing to pilot")
+    if args.forecast and (args.import_from or args.dry_run):
+        raise ParameterError("--forecast", "with " + ("--import-from" if args.import_from else "--dry-run"),
+                             "--forecast alone, or with --skies, --pilot-spp and --variant", "both given")
+    if args.forecast:
+        return forecast_batch(grid, indices, 2048 if args.pilot_spp is None else args.pilot_spp, args.variant)
     if args.dry_run:
         grid.validate()
         print(f"{args.grid}: {len(grid)} skies ({' x '.join(f'{k}[{len(v)}]' for k, v in grid.axes.items())}), "
@@ -428,6 +455,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--import-from", action="append", metavar="DIR",
                    help="bring in the skies finished in DIR, a copy of this grid's output directory rendered "
                    "elsewhere (checked by SHA-256), then stop; repeatable")
+    p.add_argument("--forecast", action="store_true", help="forecast the CPU time of each sky still to render "
+                   "(a grid with a target: a pilot render of its views, thrown away) and print it; write nothing")
+    p.add_argument("--pilot-spp", type=int, metavar="N", help="samples per view of each --forecast pilot "
+                   "(default 2048; more see rarer large contributions)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.set_defaults(run=cmd_batch)
 

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from skyref.errors import ParameterError
-from skyref.render import PixelPool, pixel_relative_error, render_sky, render_to_error, render_views, stopping_error
+from skyref.render import (PixelPool, forecast_render_to_error, pixel_relative_error, render_sky, render_to_error,
+                           render_views, stopping_error)
 from skyref.scene import ESTIMATORS, Camera, Observer, RenderSettings, Scene, Sun
 
 
@@ -116,6 +117,29 @@ def test_render_to_error_reaches_the_target_in_every_direction_with_honest_error
     assert np.all(np.isfinite(z)) and z.size == 8 * 6 * 3
     assert 0.5 < np.mean(z ** 2) < 1.8, np.mean(z ** 2)
     assert abs(np.mean(z)) * np.sqrt(z.size) < 4.0, np.mean(z)
+
+
+def test_the_forecast_of_an_adaptive_render_is_the_samples_it_takes(mi):
+    """:func:`forecast_render_to_error` replays the adaptive rounds from a pilot: on the sky of
+    the test above (delta tracking to 1.5%, 48 views), its samples per view are those the render
+    takes within 30% (the error's 1/sqrt(N) law off by a power would be 2-4x off here), it does not
+    count the pilot as rounds, and with a budget too small for the target it says how many views
+    stop short of it, as the render does."""
+    scene = Scene(sun=Sun(zenith_deg=40.0), camera=Camera(width=8, height=6), wavelengths="rgb",
+                  render=RenderSettings(passes=16, pixel_sampling="centre", estimator="delta_tracking"))
+    forecast = forecast_render_to_error(scene, 0.015, rounds=8, max_spp=65536, pilot_spp=4096, seed=5,
+                                        symmetry=False)
+    sky = render_to_error(scene, 0.015, seeds=list(range(11, 19)), max_spp=65536, symmetry=False)
+    assert forecast["views"] == 48 and forecast["views_short"] == 0
+    assert 0.7 < forecast["samples_per_view"] / sky.metadata["spp"] < 1.3, (forecast, sky.metadata["spp"])
+    assert forecast["samples"] == pytest.approx(48 * forecast["samples_per_view"])
+    assert forecast["cpu_s"] > 0.0 and forecast["pilot_cpu_s"] > 0.0
+    starved = forecast_render_to_error(scene, 0.015, rounds=8, max_spp=512, pilot_spp=4096, seed=5, symmetry=False)
+    short = render_to_error(scene, 0.015, seeds=list(range(11, 19)), max_spp=512, symmetry=False)
+    assert starved["samples_per_view"] == 512
+    assert starved["views_short"] / 48 == pytest.approx(1.0 - short.metadata["pixels_at_target"], abs=0.25)
+    with pytest.raises(ParameterError, match="pilot_spp"):
+        forecast_render_to_error(scene, 0.015, rounds=8, max_spp=512, pilot_spp=8)
 
 
 def test_render_to_error_refuses_a_target_out_of_range():

@@ -88,6 +88,29 @@ def test_cli_reports_bad_grid_in_one_line(write_grid, tmp_path):
     assert main(["batch", path, "-q"]) == 2
 
 
+def test_the_forecast_prints_each_sky_still_to_render_and_writes_nothing(write_grid, tmp_path, capsys):
+    """``skyref batch --forecast``: one line per unfinished sky (its axis values, CPU, views and
+    samples), then the total; the output directory is not created. Bad input gets one line naming
+    the parameter and exit status 2, before any pilot: a pilot count below the passes, --pilot-spp
+    without --forecast, a grid with a fixed spp (nothing adaptive to forecast)."""
+    from skyref.cli import main
+
+    output = 'directory = "out"\nwidth = 8\nheight = 4\ntarget_relative_error = 0.05\nmax_spp = 4096\npasses = 16'
+    path = write_grid(tmp_path / "grid.toml", '"sun.zenith_deg" = [20.0, 60.0]', output)
+    assert main(["batch", path, "--forecast", "--pilot-spp", "256", "--skies", "1"]) == 0
+    printed = capsys.readouterr().out
+    assert re.search(r"sky-1 \(sun\.zenith_deg=60\.0\): [\d,]+ CPU s \[[\d,]+\], \d+ views x [\d,]+ samples", printed), printed
+    assert "sky-0" not in printed and "1 skies to render" in printed
+    assert not (tmp_path / "out").exists()
+    for arguments, name in [(["--forecast", "--pilot-spp", "8"], "--pilot-spp"), (["--pilot-spp", "256"], "--pilot-spp"),
+                            (["--forecast", "--dry-run"], "--forecast")]:
+        assert main(["batch", path, *arguments]) == 2
+        assert name in capsys.readouterr().err
+    fixed = write_grid(tmp_path / "fixed.toml", '"sun.zenith_deg" = [20.0]', GOOD_OUTPUT)
+    assert main(["batch", fixed, "--forecast"]) == 2
+    assert "output.target_relative_error" in capsys.readouterr().err
+
+
 def test_seeds_are_distinct_across_skies_rounds_and_base_seeds(write_grid, tmp_path):
     seen = set()
     for base_seed in (0, 1, 2):
