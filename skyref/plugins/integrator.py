@@ -5,7 +5,7 @@ for the planet: the ground and the top of the atmosphere are analytic spheres, o
 observer-centred frame, see :mod:`skyref.plugins.geometry`).
 
 Two independent estimators (``estimator``): ``line_integral``, the default
-(:mod:`skyref.plugins.line_integral`; 8-72x less CPU to a given error, but kernels that compile
+(:mod:`skyref.plugins.line_integral`; 8-73x less CPU to a given error, but kernels that compile
 for 15 s to minutes per new configuration), and ``delta_tracking``, the baseline described
 below, which the tests compare it against. The line integral computes single scattering by
 quadrature along the camera ray, the sun's optical depth from a table, and forced collisions,
@@ -215,11 +215,15 @@ SUN_LOBE_PROBABILITY = 0.2
 #: channel. Measured 2026-12-06 (per-sample relative variance of each view's worst channel,
 #: summed over 8-10 views, 3 seeds x 65,536 paths, 17 wavelengths): hazy, 1 km, sun 80, views of
 #: the ground 30.4 -> 14.0 and of the sky 4.2 -> 3.3; 50 km, sun 80: 18.6 -> 7.8; the ground, sun
-#: 80: 12.3 -> 9.2, sun 88: 22.9 -> 15.5; at 2-16% more CPU per path. 0.5 did as well as 0.3, a
-#: Henyey-Greenstein lobe around the sun instead of the guide as well on the 1 km sky; on the clear
-#: sky (aerosol 5% of the scattering) the guide changed the variance by -2% at +9% CPU: hence
-#: the switch.
-GROUND_GUIDE_PROBABILITY = 0.3
+#: 80: 12.3 -> 9.2, sun 88: 22.9 -> 15.5; at 2-16% more CPU per path (with 0.3; 0.5 did as well
+#: on those views, a Henyey-Greenstein lobe around the sun instead of the guide as well on the 1
+#: km sky). On the clear sky (aerosol 5% of the scattering) the guide changed the variance by -2%
+#: at +9% CPU: hence the switch. 0.3 -> 0.7 measured 2026-12-07 on what a whole sky costs
+#: (`skyref batch --forecast` of the LUT truth's hazy skies still to render, two pilot seeds each,
+#: CPU to 0.3% per view): 10 km, sun 60: 858 -> 436 CPU s; 50 km, sun 30: 680 -> 466; 1 km, sun
+#: 88: 4048 -> 3103; 10 km, sun 88: 1386 -> 1276; 1 km, sun 92 (twilight): 3643 -> 3725, within
+#: its noise. 0.85 did as well as 0.7 (sun 60: 426, sun 88: 3170), 0.5 less (sun 88: 3359).
+GROUND_GUIDE_PROBABILITY = 0.7
 
 #: Least share of a column's scattering optical depth (at the guide's wavelengths) carried by
 #: forward-peaked constituents for its air to count as hazy (turbidity 2.5 and up; the clear
