@@ -43,7 +43,7 @@ from skyref.io.png import exposure_from_ev100, write_png
 from skyref.io.polarization import luminance_stokes, preview_paths, write_polarization_pngs
 from skyref.lut import METHODS, lut_method, method_class
 from skyref.lut import REGISTRY as LUT_REGISTRY
-from skyref.render import render_sky
+from skyref.render import PILOT_SPP, render_sky
 from skyref.scene import ESTIMATORS, load_scene
 from skyref.sky import degree_of_linear_polarization
 from skyref.timelapse import frame_times, parse_place, render_timelapse, sun_from_options, timelapse_scene
@@ -218,7 +218,7 @@ def cmd_batch(args) -> int:
         raise ParameterError("--forecast", "with " + ("--import-from" if args.import_from else "--dry-run"),
                              "--forecast alone, or with --skies, --pilot-spp and --variant", "both given")
     if args.forecast:
-        return forecast_batch(grid, indices, 2048 if args.pilot_spp is None else args.pilot_spp, args.variant)
+        return forecast_batch(grid, indices, PILOT_SPP if args.pilot_spp is None else args.pilot_spp, args.variant)
     if args.dry_run:
         grid.validate()
         print(f"{args.grid}: {len(grid)} skies ({' x '.join(f'{k}[{len(v)}]' for k, v in grid.axes.items())}), "
@@ -458,7 +458,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--forecast", action="store_true", help="forecast the CPU time of each sky still to render "
                    "(a grid with a target: a pilot render of its views, thrown away) and print it; write nothing")
     p.add_argument("--pilot-spp", type=int, metavar="N", help="samples per view of each --forecast pilot "
-                   "(default 2048; more see rarer large contributions)")
+                   f"(default {PILOT_SPP}; more see rarer large contributions)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.set_defaults(run=cmd_batch)
 

@@ -42,7 +42,7 @@ __all__ = ["MAX_IMAGE_VALUES", "GEOMETRIES", "sensor_dict", "build_integrator", 
            "check_image_size", "render_sky",
            "rendered_pixels", "relative_error_percentile", "pixel_relative_error", "stopping_error", "PixelPool",
            "AdaptiveProgress", "render_to_error", "round_launches", "forecast_render_to_error", "ROUND_MARGIN",
-           "traced_views", "render_views", "render_paired"]
+           "PILOT_SPP", "traced_views", "render_views", "render_paired"]
 
 #: Most values (passes x pixels x scattering orders x Stokes components (polarized: 4) x
 #: wavelengths) one render accumulates: each takes ~12 bytes across the device buffer and its host
@@ -52,6 +52,10 @@ MAX_IMAGE_VALUES = 1 << 30
 #: :func:`render_to_error` gives a pixel this margin over the samples the 1/sqrt(spp) law says it
 #: needs, so that most pixels rounded down reach the target in the next round all the same.
 ROUND_MARGIN = 1.1
+
+#: Samples per view of :func:`forecast_render_to_error`'s pilot unless told (``skyref batch
+#: --forecast --pilot-spp``): about 20 CPU s for a LUT-audit sky's 1024 views at 17 wavelengths.
+PILOT_SPP = 2048
 
 GEOMETRIES = ("spherical", "plane_parallel")
 
@@ -599,7 +603,7 @@ def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, in
 
 
 def forecast_render_to_error(scene, target_relative_error: float, rounds: int, max_spp: int,
-                             pilot_spp: int = 2048, seed: int = 0, initial_spp: int | None = None,
+                             pilot_spp: int = PILOT_SPP, seed: int = 0, initial_spp: int | None = None,
                              variant: str | None = None, symmetry: bool = True,
                              dynamic_range: float | None = None) -> dict:
     """What :func:`render_to_error` with these arguments (``rounds`` seeds) would cost, from a

@@ -506,7 +506,8 @@ def test_ground_guided_reflection_weight_is_unbiased(mi):
     direction, weight = integ._reflect_direction(up, mi.Float(u[0]), mi.Point2f(u[1], u[2]))
     w, cos = weight.numpy(), direction.z.numpy()
     assert np.all((w >= 0.0) & (w <= 1.0 / (1.0 - integrator.GROUND_GUIDE_PROBABILITY) + 1e-4))
-    print(f"weight: mean {w.mean():.5f} standard error {w.std() / np.sqrt(n):.5f}; x cos: mean {(w * cos).mean():.5f} standard error {(w * cos).std() / np.sqrt(n):.5f}")
+    print(f"weight: mean {w.mean():.5f} standard error {w.std() / np.sqrt(n):.5f}; "
+          f"x cos: mean {(w * cos).mean():.5f} standard error {(w * cos).std() / np.sqrt(n):.5f}")
     assert abs(w.mean() - 1.0) < 2e-3, w.mean()
     assert abs((w * cos).mean() - 2.0 / 3.0) < 2e-3 * 2.0 / 3.0, (w * cos).mean()
     near_sun = np.cos(np.radians(15.0))

@@ -15,9 +15,8 @@ from __future__ import annotations
 from skyref.batch.grid import MAX_ROUNDS, Grid
 from skyref.batch.store import BatchStore
 from skyref.errors import ParameterError
-from skyref.render import forecast_render_to_error
+from skyref.render import PILOT_SPP, forecast_render_to_error
 from skyref.scene import Scene
-from skyref.validation import check_int
 
 __all__ = ["PILOT_SEED", "forecast_skies", "coordinates_text"]
 
@@ -26,17 +25,16 @@ __all__ = ["PILOT_SEED", "forecast_skies", "coordinates_text"]
 PILOT_SEED = 1 << 29
 
 
-def forecast_skies(grid: Grid, indices=None, pilot_spp: int = 2048, variant: str | None = None):
+def forecast_skies(grid: Grid, indices=None, pilot_spp: int = PILOT_SPP, variant: str | None = None):
     """An iterator of (sky spec, :func:`~skyref.render.forecast_render_to_error`'s dict) for each sky of
     ``indices`` (default: all) that the grid's output directory does not hold finished, one at a
     time as its pilot ends. A sky rendered part-way is forecast whole. Only for a grid with a
-    target (``output.target_relative_error``): a fixed ``output.spp`` costs what it says. Its
-    arguments are checked at the call, before any pilot."""
+    target (``output.target_relative_error``), checked at the call: a fixed ``output.spp`` costs
+    what it says. :func:`~skyref.render.forecast_render_to_error` checks the rest before its pilot."""
     output = grid.output
     if output.target_relative_error is None:
         raise ParameterError("output.target_relative_error", None, "a target (a forecast replays the adaptive "
                              "rounds of a grid with one)", f"the grid renders a fixed output.spp = {output.spp}")
-    check_int("pilot_spp", pilot_spp, output.passes, 1 << 20)
     store = BatchStore(grid)
 
     def forecasts():
