@@ -450,8 +450,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "is finished")
     p.add_argument("--dry-run", action="store_true", help="check the grid, print its size and how far its output "
                    "directory is (skies finished, their CPU hours, skies rendered part-way); render nothing")
-    p.add_argument("--skies", metavar="LIST", help="render only these sky numbers, e.g. 0-9,20 (a part of the "
-                   "grid for one machine: the same ids and seeds as the whole grid's run)")
+    p.add_argument("--skies", metavar="LIST", help="render only these sky numbers, in this order, e.g. 0-9,20 (a "
+                   "part of the grid for one machine: the same ids and seeds as the whole grid's run)")
     p.add_argument("--import-from", action="append", metavar="DIR",
                    help="bring in the skies finished in DIR, a copy of this grid's output directory rendered "
                    "elsewhere (checked by SHA-256), then stop; repeatable")

@@ -256,6 +256,18 @@ def test_runs_on_a_given_dask_scheduler(write_grid, tmp_path):
         np.testing.assert_array_equal(a.radiance, b.radiance)
 
 
+def test_sky_numbers_keep_the_order_listed(write_grid, tmp_path):
+    """--skies "5,1-2,1": 5, 1, 2 (a batch renders cheap skies first when told so), each once;
+    a range past the grid's end, a reversed range or a word are refused naming --skies."""
+    grid = load_grid(write_grid(tmp_path / "g.toml", '"sun.zenith_deg" = [0.0, 10.0, 20.0, 30.0, 40.0, 50.0]',
+                                'directory = "g"\nwidth = 8\nheight = 4\nspp = 8\npasses = 2'))
+    assert grid.sky_numbers("5,1-2,1") == [5, 1, 2]
+    assert grid.sky_numbers(" 3 , 0-1") == [3, 0, 1]
+    for bad in ("4-6", "2-1", "two"):
+        with pytest.raises(ParameterError, match="--skies"):
+            grid.sky_numbers(bad)
+
+
 def test_part_of_a_grid_renders_those_skies_as_the_whole_grid_would(write_grid, tmp_path):
     """run_batch(indices=...): only those skies, with the whole grid's ids and seeds (the same
     EXRs as a run of the whole grid); a number outside the grid is refused naming ``indices``

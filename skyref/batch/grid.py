@@ -269,11 +269,12 @@ class Grid:
         return (self.sky(i) for i in range(len(self)))
 
     def sky_numbers(self, text: str, name: str = "--skies") -> list[int]:
-        """The sky numbers ``text`` lists: comma-separated numbers and inclusive ranges, e.g.
-        ``"0-9,20,30-39"`` (a part of the grid to render on one machine); a ParameterError
-        naming ``name`` for anything else or a number outside the grid."""
+        """The sky numbers ``text`` lists, in the order listed, each once: comma-separated numbers
+        and inclusive ranges, e.g. ``"0-9,20,30-39"`` (a part of the grid to render on one
+        machine) or ``"70-83,54"`` (cheap skies first); a ParameterError naming ``name`` for
+        anything else or a number outside the grid."""
         valid = f"numbers and ranges like 0-9,20 within [0, {len(self) - 1}]"
-        numbers = set()
+        numbers = {}    # a dict keeps the order of first appearance
         for part in str(text).split(","):
             match = re.fullmatch(r"\s*(\d+)\s*(?:-\s*(\d+)\s*)?", part)
             if match is None:
@@ -281,8 +282,8 @@ class Grid:
             first, last = int(match[1]), int(match[2] if match[2] is not None else match[1])
             if first > last or last >= len(self):
                 raise ParameterError(name, text, valid, f"{part.strip()!r} is empty or outside the grid")
-            numbers.update(range(first, last + 1))
-        return sorted(numbers)
+            numbers.update(dict.fromkeys(range(first, last + 1)))
+        return list(numbers)
 
     def seed(self, index: int, round_index: int) -> int:
         """Seed of sky ``index`` in rendering round ``round_index`` (see module docstring)."""

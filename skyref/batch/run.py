@@ -92,7 +92,7 @@ def run_batch(grid: Grid, scheduler: str | None = None, workers: int | None = No
               indices=None) -> dict:
     """Render every unfinished sky of ``grid`` (or of those among the sky numbers ``indices``,
     e.g. the part of a grid a benchmark needs: the same skies, ids and seeds as in the whole
-    grid's run); returns the manifest (see :class:`skyref.batch.store.BatchStore`) plus
+    grid's run), submitted in the order of ``indices``; returns the manifest (see :class:`skyref.batch.store.BatchStore`) plus
     ``failed`` (sky id -> error message), ``wall_time_s`` and ``netcdf``: with ``netcdf``, the
     dataset is copied to ``dataset.nc`` once every sky is finished, and this is its path (else
     None)."""
@@ -104,7 +104,7 @@ def run_batch(grid: Grid, scheduler: str | None = None, workers: int | None = No
     if indices is None:
         indices = range(len(grid))
     else:
-        indices = sorted({check_int("indices", i, 0, len(grid) - 1) for i in indices})
+        indices = list(dict.fromkeys(check_int("indices", i, 0, len(grid) - 1) for i in indices))
     if workers is not None and scheduler is not None:
         raise ParameterError("workers", workers, "only without --scheduler (the cluster sizes itself)", "conflict")
     if scheduler is None:
