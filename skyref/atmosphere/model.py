@@ -114,14 +114,22 @@ class Atmosphere:
         """sigma_t(h, lambda), m^-1, shape altitude.shape + (n_wavelengths,)."""
         return self._local("extinction_coefficient", wavelengths_nm, altitude_m)
 
+    def constituent_optical_depth(self, constituent: Constituent, wavelengths_nm, lower_m: float = 0.0,
+                                  upper_m: float | None = None, coefficient: str = "extinction") -> np.ndarray:
+        """One constituent's optical depth straight up from altitude ``lower_m`` to ``upper_m``
+        (default: the top): its ``coefficient`` ("extinction" or "scattering", m^-1 at relative
+        density 1) times its profile's column (m), integrated analytically; per wavelength."""
+        upper = self.thickness_m if upper_m is None else upper_m
+        wl = np.atleast_1d(np.asarray(wavelengths_nm, dtype=np.float64))
+        return getattr(constituent, f"{coefficient}_coefficient")(wl) * constituent.profile.column(lower_m, upper)
+
     def vertical_optical_depth(self, wavelengths_nm, lower_m: float = 0.0,
                                upper_m: float | None = None) -> np.ndarray:
         """Optical depth straight up from altitude ``lower_m`` to ``upper_m`` (default: the top),
-        summed over constituents, each integrated analytically."""
-        upper = self.thickness_m if upper_m is None else upper_m
+        summed over constituents (:meth:`constituent_optical_depth`)."""
         wl = np.atleast_1d(np.asarray(wavelengths_nm, dtype=np.float64))
-        return sum((c.extinction_coefficient(wl) * c.profile.column(lower_m, upper)
-                    for c in self.constituents), np.zeros_like(wl))
+        return sum((self.constituent_optical_depth(c, wl, lower_m, upper_m) for c in self.constituents),
+                   np.zeros_like(wl))
 
     def distance_to_boundary(self, altitude_m: float, cos_zenith: float) -> tuple[float, bool]:
         """Distance (m) from a point at ``altitude_m`` along a ray of zenith cosine

@@ -71,8 +71,7 @@ def rayleigh_only() -> Atmosphere:
 
 
 def rayleigh_optical_depth(atmosphere: Atmosphere, wavelength_nm: float = TURBIDITY_WAVELENGTH_NM) -> float:
-    return float(atmosphere["rayleigh"].extinction_coefficient([wavelength_nm])[0]
-                 * atmosphere["rayleigh"].profile.column(0.0, atmosphere.thickness_m))
+    return float(atmosphere.constituent_optical_depth(atmosphere["rayleigh"], wavelength_nm)[0])
 
 
 def from_turbidity(turbidity: float, angstrom_alpha: float = 1.3,
@@ -101,11 +100,8 @@ def turbidity(atmosphere: Atmosphere) -> float:
     """The Linke/Preetham turbidity of an atmosphere at 550 nm (inverse of
     :func:`from_turbidity`); 1 for an atmosphere without aerosol."""
     tau_m = rayleigh_optical_depth(atmosphere)
-    tau_a = 0.0
-    for c in atmosphere.constituents:
-        if c.kind == "aerosol":
-            tau_a += float(c.extinction_coefficient([TURBIDITY_WAVELENGTH_NM])[0]
-                           * c.profile.column(0.0, atmosphere.thickness_m))
+    tau_a = sum(float(atmosphere.constituent_optical_depth(c, TURBIDITY_WAVELENGTH_NM)[0])
+                for c in atmosphere.constituents if c.kind == "aerosol")
     return (tau_m + tau_a) / tau_m
 
 

@@ -586,7 +586,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         forward-peaked constituents (aerosols) carry."""
         wavelengths = [self.wavelengths_nm[k] for k in guide_channels(self.wavelengths_nm)]
         scatterers = [c for c in atmosphere.constituents if c.phase is not None]
-        depth = [float(np.mean(c.scattering_coefficient(wavelengths))) * c.profile.column(0.0, atmosphere.thickness_m)
+        depth = [float(np.mean(atmosphere.constituent_optical_depth(c, wavelengths, coefficient="scattering")))
                  for c in scatterers]
         forward = sum(tau for c, tau in zip(scatterers, depth) if c.phase.has_forward_peak)
         return forward / max(sum(depth), 1e-30)
