@@ -42,7 +42,7 @@ __all__ = ["MAX_IMAGE_VALUES", "GEOMETRIES", "sensor_dict", "build_integrator", 
            "check_image_size", "render_sky",
            "rendered_pixels", "relative_error_percentile", "pixel_relative_error", "stopping_error", "PixelPool",
            "AdaptiveProgress", "render_to_error", "round_launches", "forecast_render_to_error", "ROUND_MARGIN",
-           "PILOT_SPP", "traced_views", "render_views", "render_paired"]
+           "LAUNCH_SAMPLES", "launch_parts", "launch_seed", "PILOT_SPP", "traced_views", "render_views", "render_paired"]
 
 #: Most values (passes x pixels x scattering orders x Stokes components (polarized: 4) x
 #: wavelengths) one render accumulates: each takes ~12 bytes across the device buffer and its host
@@ -52,6 +52,14 @@ MAX_IMAGE_VALUES = 1 << 30
 #: :func:`render_to_error` gives a pixel this margin over the samples the 1/sqrt(spp) law says it
 #: needs, so that most pixels rounded down reach the target in the next round all the same.
 ROUND_MARGIN = 1.1
+
+#: Most samples (views x samples per view) in one launch of :func:`render_to_error`: a round's
+#: launch of more is split into launches over parts of its views, so that a checkpoint is written
+#: (and a batch's progress told) every few minutes of a hard sky, not every ~15 (the LUT audit's
+#: hazy sky at sun 92 seen from 1 km, 17 wavelengths: one launch of its second round took 887 s
+#: on 2 cores). 2^25 samples are ~5 CPU minutes at 17 wavelengths (~10 us a sample); tracing a
+#: launch costs ~1-2 s.
+LAUNCH_SAMPLES = 1 << 25
 
 #: Samples per view of :func:`forecast_render_to_error`'s pilot unless told (``skyref batch
 #: --forecast --pilot-spp``): about 20 CPU s for a LUT-audit sky's 1024 views at 17 wavelengths.
@@ -465,18 +473,24 @@ class AdaptiveProgress:
     @staticmethod
     def describe(path, target_relative_error: float) -> str | None:
         """How far the render kept in the checkpoint ``path`` is, in a few words (rounds done, the
-        share of its views at ``target_relative_error``, render time); None while there is none."""
+        launches done of the round under way, the share of its views at ``target_relative_error``,
+        render time); None while there is none."""
         try:
             with np.load(path) as kept:
                 orders, variance = kept["orders"][:, :, 0], kept["variance"][:, 0]
                 rounds, elapsed = int(kept["round"]), float(kept["elapsed"])
+                done, launches = int(kept["done"]), len(kept["launch_spp"]) if bool(kept["planned"]) else 0
                 wavelengths_nm, dynamic_range = kept["wavelengths_nm"], float(kept["dynamic_range"])
         except (FileNotFoundError, OSError, KeyError, ValueError):     # not written yet, or replaced meanwhile
             return None
         error = stopping_error(orders, np.sqrt(variance), wavelengths_nm,
                                None if math.isnan(dynamic_range) else dynamic_range)
-        return (f"{rounds} round{'s' if rounds != 1 else ''} done, {np.mean(error <= target_relative_error):.0%} of "
-                f"{error.size} views at {100 * target_relative_error:g}%, render time {elapsed:.0f} s")
+        if launches and done == launches:          # saved after a round's last launch: that round is done
+            rounds, launches = rounds + 1, 0
+        under_way = f" (round {rounds + 1}: {done} of {launches} launches)" if launches else ""
+        return (f"{rounds} round{'s' if rounds != 1 else ''} done{under_way}, "
+                f"{np.mean(error <= target_relative_error):.0%} of {error.size} views at "
+                f"{100 * target_relative_error:g}%, render time {elapsed:.0f} s")
 
 
 def _adaptive_key(scene, target_relative_error, seeds, max_spp, initial_spp, views, dynamic_range) -> str:
@@ -507,18 +521,29 @@ def _adaptive_views(scene, max_spp: int, initial_spp: int | None, seed: int, sym
     return scene, spp, pixels, views, estimate_of, mirrored, max_spp * np.bincount(estimate_of, minlength=views.size)
 
 
+def launch_parts(spp_per_pass: int, positions, passes: int) -> list:
+    """The views ``positions`` that take ``spp_per_pass`` x ``passes`` samples each, in launches
+    of at most LAUNCH_SAMPLES samples (at least one view each): (samples per pass, positions,
+    part number) per launch."""
+    per_launch = max(1, LAUNCH_SAMPLES // (spp_per_pass * passes))
+    return [(spp_per_pass, positions[first:first + per_launch], part)
+            for part, first in enumerate(range(0, len(positions), per_launch))]
+
+
 def round_launches(samples, error, target_relative_error: float, budget, passes: int) -> list:
-    """A later round of :func:`render_to_error`: (samples per pass, positions) of each launch,
-    given each view's ``samples`` so far, its :func:`stopping_error` and its ``budget`` (most
-    samples). A view above the target asks for what the 1/sqrt(spp) law says it still needs,
-    with ``ROUND_MARGIN``, rounded to ``passes`` x the nearest power of two, within its budget."""
+    """A later round of :func:`render_to_error`: (samples per pass, positions, part number) of
+    each launch, given each view's ``samples`` so far, its :func:`stopping_error` and its
+    ``budget`` (most samples). A view above the target asks for what the 1/sqrt(spp) law says it
+    still needs, with ``ROUND_MARGIN``, rounded to ``passes`` x the nearest power of two, within
+    its budget; the views of one count are traced in :func:`launch_parts`."""
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
         wanted = np.ceil(ROUND_MARGIN * samples * (error / target_relative_error) ** 2) - samples
     room = (budget - samples) // passes                            # samples per pass left
     counts = 2 ** np.round(np.log2(np.maximum(np.nan_to_num(wanted, posinf=budget.max()) / passes, 1.0)))
     counts = np.minimum(counts, 2 ** np.floor(np.log2(np.maximum(room, 1))))
     active = (error > target_relative_error) & (room >= 1)
-    return [(int(count), np.flatnonzero(active & (counts == count))) for count in np.unique(counts[active])]
+    return [launch for count in np.unique(counts[active])
+            for launch in launch_parts(int(count), np.flatnonzero(active & (counts == count)), passes)]
 
 
 def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, initial_spp: int | None = None,
@@ -564,11 +589,14 @@ def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, in
             os.remove(checkpoint)
 
     def plan(round_index, seed) -> list:
-        """The launches of a round: (samples per pass, positions in ``views``, seed) each."""
+        """The launches of a round: (samples per pass, positions in ``views``, seed) each; the
+        seed differs between a round's counts and between the parts of one count."""
         if round_index == 0:
-            return [(spp // passes, np.arange(views.size), seed)]
-        return [(count, members, (seed + 0x9E3779B1 * count.bit_length()) % (1 << 31)) for count, members
-                in round_launches(pool.samples, progress.error(), target_relative_error, budget, passes)]
+            launches = launch_parts(spp // passes, np.arange(views.size), passes)
+        else:
+            launches = round_launches(pool.samples, progress.error(), target_relative_error, budget, passes)
+        return [(count, members, launch_seed(seed, count if round_index else 0, part))
+                for count, members, part in launches]
 
     while progress.round < len(seeds):
         if progress.launches is None:
@@ -600,6 +628,15 @@ def render_to_error(scene, target_relative_error: float, seeds, max_spp: int, in
     sky = _sky(scene, pixels, orders.sum(axis=1), pool.standard_error[estimate_of], orders, metadata)
     sky.metadata["relative_error_p95"] = relative_error_percentile(sky)
     return sky
+
+
+def launch_seed(round_seed: int, spp_per_pass: int, part: int) -> int:
+    """The seed of one launch of a :func:`render_to_error` round: the round's own seed, mixed in
+    later rounds (``spp_per_pass`` > 0) with the launch's count, and for every part of a count
+    after the first with the part's number."""
+    if spp_per_pass:
+        round_seed = (round_seed + 0x9E3779B1 * spp_per_pass.bit_length()) % (1 << 31)
+    return (round_seed + 0x85EBCA77 * part) % (1 << 31) if part else round_seed
 
 
 def forecast_render_to_error(scene, target_relative_error: float, rounds: int, max_spp: int,
@@ -643,10 +680,10 @@ def forecast_render_to_error(scene, target_relative_error: float, rounds: int, m
     with np.errstate(over="ignore", invalid="ignore"):
         variance = stopping_error(orders[:, :, 0, :], standard_error[:, 0, :], scene.wavelengths_nm,
                                   dynamic_range) ** 2 * pilot_samples
-    samples, launches = np.full(views.size, spp, dtype=np.int64), 1
+    samples, launches = np.full(views.size, spp, dtype=np.int64), len(launch_parts(spp // passes, views, passes))
     for _ in range(rounds - 1):
         round_plan = round_launches(samples, np.sqrt(variance / samples), target_relative_error, budget, passes)
-        for count, members in round_plan:
+        for count, members, _ in round_plan:
             samples[members] += count * passes
         launches += len(round_plan)
         if not round_plan:

@@ -206,7 +206,8 @@ def test_a_killed_adaptive_render_resumes_at_its_next_launch_to_the_same_sky(mi,
     assert path.exists()
     # what a batch's progress bar says of it: rounds done, views at the target, render time
     views = whole.metadata["views_traced"]
-    assert re.fullmatch(rf"[12] rounds? done, \d+% of {views} views at 1%, render time \d+ s", render.AdaptiveProgress.describe(path, 0.01))
+    assert re.fullmatch(rf"[12] rounds? done \(round [23]: \d+ of \d+ launches\), \d+% of {views} views at 1%, "
+                        r"render time \d+ s", render.AdaptiveProgress.describe(path, 0.01))
     assert render.AdaptiveProgress.describe(tmp_path / "none.npz", 0.01) is None
     launches.clear()
     kill_after = None
@@ -223,6 +224,43 @@ def test_a_killed_adaptive_render_resumes_at_its_next_launch_to_the_same_sky(mi,
     other = render_to_error(scene, 0.02, checkpoint=path, **arguments)     # its own render, from the start
     assert launches[0] == views and other.metadata["target_relative_error"] == 0.02
     assert checkpoint_at_start == [False]          # the other render's file was gone before its first launch
+
+
+def test_a_large_launch_is_split_into_parts_with_seeds_of_their_own(mi, monkeypatch):
+    """With LAUNCH_SAMPLES at 1024, every launch of an adaptive render traces at most 1024
+    samples (or one view), the first round's parts cover every view once, no two launches share
+    a seed (two parts traced with one seed would correlate their views), and the sky agrees with
+    an unsplit render's within its error bars; unsplit, a round's launches keep the seeds they had."""
+    import skyref.render as render
+
+    scene = Scene(sun=Sun(zenith_deg=40.0), camera=Camera(width=8, height=6), wavelengths="rgb",
+                  render=RenderSettings(passes=16, pixel_sampling="centre", estimator="delta_tracking"))
+    arguments = dict(seeds=[11, 12, 13], max_spp=8192)
+    launches = []
+    real_passes = render._PixelRenderer.passes
+
+    def recorded(self, pixels, spp_per_pass, passes, seed, *args, **kwargs):
+        launches.append((len(pixels), spp_per_pass * passes, seed, tuple(pixels)))
+        return real_passes(self, pixels, spp_per_pass, passes, seed, *args, **kwargs)
+
+    monkeypatch.setattr(render._PixelRenderer, "passes", recorded)
+    whole = render_to_error(scene, 0.01, **arguments)
+    unsplit = list(launches)
+    assert unsplit[0][2] == 11 and len({seed for _, _, seed, _ in unsplit}) == len(unsplit)
+    launches.clear()
+    monkeypatch.setattr(render, "LAUNCH_SAMPLES", 1024)
+    split = render_to_error(scene, 0.01, **arguments)
+    assert len(launches) > len(unsplit)
+    assert all(views * samples <= 1024 or views == 1 for views, samples, _, _ in launches)
+    assert len({seed for _, _, seed, _ in launches}) == len(launches)
+    views, covered, first_round = whole.metadata["views_traced"], [], 0
+    while len(covered) < views:                       # the first round's parts come first
+        covered += launches[first_round][3]
+        first_round += 1
+    assert first_round > 1 and len(covered) == len(set(covered)) == views
+    assert all(samples == 256 for _, samples, _, _ in launches[:first_round])
+    z = (split.radiance - whole.radiance) / np.hypot(split.standard_error, whole.standard_error)
+    assert 0.4 < np.mean(z ** 2) < 1.9 and np.max(np.abs(z)) < 4.5, z
 
 
 @pytest.mark.parametrize("checkpoint,reason", [("sky.exr", "wrong extension"), ("folder.npz", "an existing directory")])

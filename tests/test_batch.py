@@ -405,7 +405,7 @@ def test_an_adaptive_sky_killed_mid_render_resumes_from_its_checkpoint(write_gri
     assert os.path.exists(checkpoint) and _markers(killed_dir) == [], "the kill must land mid-render"
     dry_run = subprocess.run([*_batch_command(killed)[:-3], "--dry-run"], capture_output=True, text=True)
     assert "0 of 1 skies finished (0.00 CPU hours), 1 rendered part-way, 0 not started" in dry_run.stdout
-    assert re.search(r"sky-0: \d+ rounds? done, \d+% of \d+ views at 1%, render time \d+ s", dry_run.stdout)
+    assert re.search(r"sky-0: \d+ rounds? done( \(round \d+: \d+ of \d+ launches\))?, \d+% of \d+ views at 1%, render time \d+ s", dry_run.stdout)
     with np.load(checkpoint) as kept:
         assert int(kept["samples"].min()) > 0                  # the first round was kept
         state = dict(kept)
