@@ -8,8 +8,9 @@ standard errors, the RMS relative difference of I, and the CPU time. Then, on ca
 Rayleigh layer of optical thickness 0.5, sun at the zenith), scalar transport's I against the
 polarized I by view zenith, the difference the issue measured with DISORT.
 
-Usage: ``python benchmarks/iprt.py [--stride K] [--target T] [--cases a1,b2,...]`` (every K-th
-row of each file, of the given cases; default every row of every case at 0.1%); writes ``results/iprt.md`` and ``results/iprt.json``
+Usage: ``python benchmarks/iprt.py [--stride K] [--target T] [--cases a1,b2,...] [--estimator E]``
+(every K-th row of each file, of the given cases, by the line integral or delta tracking;
+default every row of every case at 0.1%, line integral); writes ``results/iprt.md`` and ``results/iprt.json``
 (``{"cases": {name: {"max_abs_z": ..., "rms_rel_diff_I": ..., ...}}}``).
 """
 
@@ -32,9 +33,9 @@ from results_files import machine, write_results  # noqa: E402
 from tests.references import iprt  # noqa: E402
 
 
-def compare(setting, rows, target):
+def compare(setting, rows, target, estimator):
     start = time.process_time()
-    mean, se, samples = iprt.estimate(setting, rows, target)
+    mean, se, samples = iprt.estimate(setting, rows, target, estimator=estimator)
     seconds = time.process_time() - start
     z = iprt.z_scores(mean, se, rows)
     lit = rows[:, 6] > 0.0
@@ -47,18 +48,18 @@ def compare(setting, rows, target):
             "samples_per_direction": float(samples.mean()), "cpu_seconds": seconds}
 
 
-def scalar_error_a1(target):
+def scalar_error_a1(target, estimator):
     """Scalar I / polarized I - 1 on A1 (depolarization 0, sun at the zenith), bottom, by view
     zenith (azimuthally symmetric: one azimuth)."""
     setting = iprt.settings("a1")[0]
     rows = setting.rows[setting.rows[:, 5] == 0.0]
-    polarized, polarized_se, _ = iprt.estimate(setting, rows, target)
+    polarized, polarized_se, _ = iprt.estimate(setting, rows, target, estimator=estimator)
     from skyref.atmosphere import solar_irradiance
     from skyref.render import build_integrator
-    from skyref.scene import Observer, Scene, Sun
+    from skyref.scene import Observer, RenderSettings, Scene, Sun
 
     scene = Scene(atmosphere=iprt.atmosphere(setting), sun=Sun(0.0, 65.0), observer=Observer(0.0),
-                  wavelengths=[iprt.WAVELENGTH_NM["a1"]])
+                  wavelengths=[iprt.WAVELENGTH_NM["a1"]], render=RenderSettings(estimator=estimator))
     scalar_integrator = build_integrator(scene, geometry="plane_parallel")
     batches = scalar_integrator.render_directions(iprt.directions(rows), seed=11, spp=1 << 16, batches=16).numpy()
     sky = batches[:, :, 1:, 0].sum(axis=2) / float(np.asarray(solar_irradiance([iprt.WAVELENGTH_NM["a1"]]))[0])
@@ -73,7 +74,8 @@ def markdown(report):
     lines = ["# skyref vs. IPRT (MYSTIC): polarized ground truth", "",
              f"Produced {report['date']} by `python benchmarks/iprt.py {report['arguments']}` on {report['machine']} "
              "(llvm_ad_rgb, 2 cores). Cases as in `tests/references/iprt.py` (IPRT phase A/B, Emde et al. 2015; "
-             "MYSTIC results CC BY-SA 3.0, the IPRT project); plane-parallel, delta tracking with Stokes vectors, "
+             f"MYSTIC results CC BY-SA 3.0, the IPRT project); plane-parallel, the {report['estimator'].replace('_', ' ')} "
+             "estimator with Stokes vectors, "
              f"relative standard error of I {report['target'] * 100:g}% per direction (16 batches); z-scores "
              "against MYSTIC with the combined standard errors. Not set up: B3 (spheroidal aerosol, no phase "
              "matrix here), B4 (ocean surface).", "",
@@ -87,7 +89,7 @@ def markdown(report):
     lines += ["", "## What scalar transport gets wrong (A1: Rayleigh, optical thickness 0.5, sun at the zenith, "
               "seen from the bottom)", "", "| view zenith | scalar I / polarized I - 1 | s.e. |", "|---:|---:|---:|"]
     for r in report["scalar_vs_polarized_a1"]:
-        lines.append(f"| {r['view_zenith_deg']:.0f} | {r['scalar_over_polarized_minus_1'] * 100:+.2f}% | "
+        lines.append(f"| {abs(r['view_zenith_deg']):.0f} | {r['scalar_over_polarized_minus_1'] * 100:+.2f}% | "
                      f"{r['se'] * 100:.2f}% |")
     lines += ["", "Scalar transport (the LUT methods' and the analytic models' physics, and skyref's default mode) "
               "treats Rayleigh scattering with its phase function P11 alone; the polarization that single "
@@ -100,18 +102,20 @@ def main():
     parser.add_argument("--stride", type=int, default=1, help="every K-th row of each result file")
     parser.add_argument("--target", type=float, default=0.001, help="relative standard error of I")
     parser.add_argument("--cases", default=",".join(iprt.CASES), help="comma-separated IPRT cases")
+    parser.add_argument("--estimator", default="line_integral", choices=("line_integral", "delta_tracking"),
+                        help="skyref's estimator (default: the ground truth's, the line integral)")
     args = parser.parse_args()
     unknown = sorted(set(args.cases.split(",")) - set(iprt.CASES))
     if unknown:
         parser.error(f"--cases: {', '.join(unknown)} not among {', '.join(iprt.CASES)}")
     report = {"date": datetime.datetime.now().isoformat(timespec="minutes"), "machine": machine(),
-              "arguments": " ".join(sys.argv[1:]), "target": args.target, "cases": {}}
+              "arguments": " ".join(sys.argv[1:]), "target": args.target, "estimator": args.estimator, "cases": {}}
     for case in args.cases.split(","):
         for setting in iprt.settings(case):
             rows = setting.rows[::args.stride]
-            report["cases"][setting.name] = compare(setting, rows, args.target)
+            report["cases"][setting.name] = compare(setting, rows, args.target, args.estimator)
             print(setting.name, json.dumps(report["cases"][setting.name]), flush=True)
-    report["scalar_vs_polarized_a1"] = scalar_error_a1(args.target)
+    report["scalar_vs_polarized_a1"] = scalar_error_a1(args.target, args.estimator)
     write_results("iprt", report, markdown(report))
 
 
