@@ -16,7 +16,7 @@ Carlo, drawn from scrambled Sobol points (:mod:`skyref.plugins.sobol`), with a s
 the scattering directions where there is aerosol and a guide towards where the scattered light
 comes from (:mod:`skyref.plugins.guiding`), that mixture itself mixed over the whole path with
 the phase function alone (:class:`PathSampling`), and its directions resampled by phase function x
-guide (but at twilight); its Russian roulette weighs what a path is expected to bring by the
+guide; its Russian roulette weighs what a path is expected to bring by the
 guide's radiance (``IMPORTANCE_ROULETTE_WINDOW``); under hazy air a path leaving the ground
 draws its direction from the guide too (``GROUND_GUIDE_PROBABILITY``). For a fixed camera
 direction the camera segment's light is traced apart, once per few paths. Its quadrature is
@@ -146,7 +146,7 @@ SHADOW_ROULETTE = 0.05
 ROULETTE_DEPTH = 3
 
 #: The line-integral estimator plays Russian roulette from this many vertices on. Where the
-#: guide holds no multiply scattered light (its own pilot, twilight), on paths whose largest
+#: guide holds no multiply scattered light (its own pilot; twilight until 2026-12-07), on paths whose largest
 #: channel throughput has fallen below LINE_ROULETTE_THROUGHPUT times what it was at the first
 #: vertex (survival = the ratio / it). Relative, because the forced collision's weight on the
 #: camera segment is that segment's scattering probability: ~1e-4 on a ray up from 50 km, where
@@ -175,10 +175,10 @@ LINE_ROULETTE_THROUGHPUT = 0.1
 #: path): that sky 2.0x better (23.6 -> 10.4 at +13% CPU; the ground at the observer's feet
 #: 13.5 -> 2.2), sunset (sun 88, RGB) 1.8x, hazy sun 60 (RGB) 1.3x, clear sun 60 (RGB) 1.25x,
 #: turbidity 6, albedo 1, sun 88.6 (21 wavelengths) 1.2x; windows 0.15 / 0.6 within 10% of 0.3
-#: but the clear sky at 0.6 (1.3x worse) and 1.0 / 3.0 worse still. Not at twilight, where the
-#: guide has no pilot: read from single scattering alone it lowered the variance 3.6x in the
-#: median of 5 seeds but doubled it on one (a heavy tail of paths killed where the table
-#: foresaw no light).
+#: but the clear sky at 0.6 (1.3x worse) and 1.0 / 3.0 worse still. At twilight too since
+#: 2026-12-07, with the guide's pilot there (``RESAMPLED_DIRECTIONS_HAZY``); before it, read from
+#: single scattering alone, it had lowered the variance 3.6x in the median of 5 seeds but doubled
+#: it on one (a heavy tail of paths killed where the table foresaw no light).
 IMPORTANCE_ROULETTE_WINDOW = 0.3
 
 #: Points per segment at which a line-integral path's segments after the camera's sample their
@@ -269,13 +269,19 @@ TWILIGHT_GUIDED_PATH_PRIOR = 1.0
 #: / 3.32, +32% CPU; turbidity 6, albedo 1, sun 88.6, 21 wavelengths: 17.9 -> 12.1 (mean over
 #: channels 1.38 -> 0.69) at the same CPU; sunset (sun 88) 0.83 -> 0.44, +17%; clear (sun 60) 0.13
 #: -> 0.11 (mean 0.020 -> 0.013), +31%. 4 candidates: 4.95 against 3.63 on the hazy sky, 16: no
-#: better than 8. At twilight it was worse (28.9 -> 40.3): there the light of every order comes
-#: from the lit air the single-scattering guide aims at, and paths keep one direction from the
-#: guided mixture.
+#: better than 8. At twilight it was worse then (28.9 -> 40.3), and twilight kept one direction,
+#: the single-scattering guide and the throughput roulette until 2026-12-07; with the estimator
+#: of that day the pilot, these directions and the roulette on the guide's radiance pay there
+#: too: CPU to 0.3% per view forecast for LUT-audit twilight skies (``skyref batch --forecast``,
+#: 17 wavelengths), hazy bruneton2017 from 1 km at sun 92 / 96 2,845 -> 1,520 / 2,611 -> 1,138
+#: s, hazy hillaire2020 from 1 / 10 km at sun 92 4,925 -> 2,324 / 2,362 -> 1,866 s, clear skies
+#: at sun 92 / 96 from the ground 153 -> 122 / 189 -> 76 s, from 1 km 494 -> 475 / 581 -> 234 s;
+#: the speed benchmark's twilight sky (sun 96, 1024 samples per pixel) 283 -> 173 CPU s to 1%
+#: in RGB, 480 -> 270 at 17 wavelengths.
 RESAMPLED_DIRECTIONS_HAZY = 8
 
 #: Candidate directions where Rayleigh scattering carries most of the column's (clear air, the
-#: sunset; not at twilight). Its paths are short and cheap, so 8 candidates cost more than they
+#: sunset, twilight). Its paths are short and cheap, so 8 candidates cost more than they
 #: save. Measured 2026-12-07 on `results/groundtruth_speed.md`'s skies (128 x 64 pixel centres, 1024
 #: samples each, CPU to 1% relative RMS over the sky, two seeds, the batch niced beside it), 8 ->
 #: 4 candidates: clear RGB 3.58 -> 2.95 CPU s (1.21x), 17 wavelengths 6.66 -> 5.44 (1.22x), sunset
@@ -524,8 +530,8 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         #: traced by the delta-tracking estimator (the line integral assumes open sky).
         self.objects = None
         #: Candidate directions per scattering event of a line-integral path
-        #: (:meth:`_scatter_direction`): ``RESAMPLED_DIRECTIONS`` (``_HAZY`` in hazy air), 1 at
-        #: twilight.
+        #: (:meth:`_scatter_direction`): ``RESAMPLED_DIRECTIONS`` (``_HAZY`` in hazy air); 1 for
+        #: single scattering alone (no guide).
         self.resampled_directions = 1
         #: Whether a line-integral path leaving the ground may draw its direction from the guide
         #: (:meth:`_reflect_direction`).
@@ -541,7 +547,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
             self.guide = (ScatteredLightGuide(self.line, self.geometry, self.sun, self.wavelengths_nm)
                           if self.max_depth > 1 else None)
             hazy = self._forward_scattering_share(atmosphere) >= HAZY_FORWARD_SHARE
-            if self.guide is not None and not self.twilight:
+            if self.guide is not None:
                 self._guide_multiple_scattering()
                 self.resampled_directions = RESAMPLED_DIRECTIONS_HAZY if hazy else RESAMPLED_DIRECTIONS
             reflects = bool(np.any(atmosphere.ground_albedo(self.wavelengths_nm) > 0.0))
@@ -1122,7 +1128,7 @@ class AtmosphereIntegrator(mi.SamplingIntegrator):
         c <- c q / (c q + (1 - c) p_phase). The product of the MIS weights along the path then
         stays below 1 / (1 - c_prior) times the phase function's own (``GUIDED_PATH_PRIOR``).
 
-        Where ``resampled_directions`` M > 1 (all but twilight), the direction is then resampled
+        Where ``resampled_directions`` M > 1 (wherever there is a guide), the direction is then resampled
         (Talbot et al. 2005): M candidates drawn from that mixture q (the first from ``u_choice``
         and ``u_direction``, the others from ``sampler``), one kept with probability proportional
         to w_j = t(omega_j) / q(omega_j) with the target t = phase function x (guide density +
