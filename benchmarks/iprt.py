@@ -30,6 +30,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
 from results_files import machine, write_results  # noqa: E402
 
+from skyref.scene import DEFAULT_ESTIMATOR, ESTIMATORS  # noqa: E402
 from tests.references import iprt  # noqa: E402
 
 
@@ -56,11 +57,11 @@ def scalar_error_a1(target, estimator):
     polarized, polarized_se, _ = iprt.estimate(setting, rows, target, estimator=estimator)
     from skyref.atmosphere import solar_irradiance
     from skyref.render import build_integrator
-    from skyref.scene import Observer, RenderSettings, Scene, Sun
+    from skyref.scene import Observer, Scene, Sun
 
     scene = Scene(atmosphere=iprt.atmosphere(setting), sun=Sun(0.0, 65.0), observer=Observer(0.0),
-                  wavelengths=[iprt.WAVELENGTH_NM["a1"]], render=RenderSettings(estimator=estimator))
-    scalar_integrator = build_integrator(scene, geometry="plane_parallel")
+                  wavelengths=[iprt.WAVELENGTH_NM["a1"]])
+    scalar_integrator = build_integrator(scene, geometry="plane_parallel", estimator=estimator)
     batches = scalar_integrator.render_directions(iprt.directions(rows), seed=11, spp=1 << 16, batches=16).numpy()
     sky = batches[:, :, 1:, 0].sum(axis=2) / float(np.asarray(solar_irradiance([iprt.WAVELENGTH_NM["a1"]]))[0])
     scalar, scalar_se = sky.mean(axis=0), sky.std(axis=0, ddof=1) / 4.0
@@ -102,7 +103,7 @@ def main():
     parser.add_argument("--stride", type=int, default=1, help="every K-th row of each result file")
     parser.add_argument("--target", type=float, default=0.001, help="relative standard error of I")
     parser.add_argument("--cases", default=",".join(iprt.CASES), help="comma-separated IPRT cases")
-    parser.add_argument("--estimator", default="line_integral", choices=("line_integral", "delta_tracking"),
+    parser.add_argument("--estimator", default=DEFAULT_ESTIMATOR, choices=ESTIMATORS,
                         help="skyref's estimator (default: the ground truth's, the line integral)")
     args = parser.parse_args()
     unknown = sorted(set(args.cases.split(",")) - set(iprt.CASES))
