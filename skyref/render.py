@@ -62,8 +62,17 @@ ROUND_MARGIN = 1.1
 LAUNCH_SAMPLES = 1 << 25
 
 #: Samples per view of :func:`forecast_render_to_error`'s pilot unless told (``skyref batch
-#: --forecast --pilot-spp``): about 20 CPU s for a LUT-audit sky's 1024 views at 17 wavelengths.
+#: --forecast --pilot-spp``): about 10-20 CPU s for a LUT-audit sky's 1024 views at 17
+#: wavelengths, and a quarter of that again to time its groups of views (``COST_GROUPS``).
 PILOT_SPP = 2048
+
+#: Groups of views (equal in number, by the samples each is forecast to take) whose CPU per
+#: sample :func:`forecast_render_to_error` times apart. A sample's cost differs between views: on
+#: the LUT audit's hazy twilight skies the quarter of the views that takes most of the samples
+#: (78-87%) costs 1.5-1.9x the mean sample of the pilot (sky 69: 8.9 against 5.8 us, sky 76: 9.7
+#: against 5.0; the cheapest half 1.4-3.2 us), where a clear sky's views cost the same (sky 10:
+#: 4.4-4.9 us).
+COST_GROUPS = 4
 
 GEOMETRIES = ("spherical", "plane_parallel")
 
@@ -647,16 +656,22 @@ def forecast_render_to_error(scene, target_relative_error: float, rounds: int, m
     pilot render of every view it traces at ``pilot_spp`` samples (seed ``seed``, thrown away):
     each view's relative variance of one sample (its :func:`stopping_error` squared x the pilot's
     samples), then :func:`render_to_error`'s rounds replayed (:func:`round_launches`) as if each
-    view's error fell exactly as 1/sqrt(samples). Its CPU is the samples at the pilot's CPU per
-    view-sample plus, per launch, what a launch of a few samples costs (tracing the kernels: on
-    a small sky most of it); compiling the kernels is not counted. It does not see a heavy tail
-    the pilot did not draw, nor the noise of the rounds' own estimates: the LUT audit's hazy skies
-    45 and 50-52 (17 wavelengths, 0.3%) took 1.2-1.4x the forecast CPU, 50-52 1.16-1.21x its
-    samples.
+    view's error fell exactly as 1/sqrt(samples). Its CPU is each view's samples at the CPU per
+    sample of its group (``COST_GROUPS`` groups of views by the samples forecast, each timed at a
+    quarter of the pilot's samples per view) plus, per launch, what a launch of a few samples
+    costs (tracing the kernels: on a small sky most of it); compiling the kernels is not counted.
+    It does not see a heavy tail the pilot did not draw, nor the noise of the rounds' own
+    estimates. The LUT audit's skies (17 wavelengths, 0.3%; 1% at sun zenith 96) against this
+    forecast (2026-12-07): hazy sky 45 (the ground, sun 80) took 1.41x its CPU and 1.24x its
+    samples (50-52: 1.16-1.21x the samples); the hazy twilight skies 69 and 76 (sun 96, from 50
+    and 100 km) 2.37x / 2.36x the CPU and 2.27x / 2.45x the samples, where the pilot draws too
+    little of their tails. (Timed at the pilot's mean CPU per sample, those two were forecast at
+    537 and 436 s instead of 707 and 561.)
 
     Returns {"cpu_s", "samples" (traced in all), "launches", "views" (traced), "samples_per_view"
     (mean), "views_short" (left above the target when their budget, ``max_spp`` x their pixels,
-    or the rounds run out), "pilot_cpu_s"}."""
+    or the rounds run out), "pilot_cpu_s" (the pilot's and the timing launches'), "groups" (per
+    group of views, from the fewest samples to the most: {"views", "samples", "us_per_sample"})}."""
     check_number("target_relative_error", target_relative_error, 1e-5, 1.0)
     check_int("rounds", rounds, 1, 64)
     if dynamic_range is not None:
@@ -666,7 +681,7 @@ def forecast_render_to_error(scene, target_relative_error: float, rounds: int, m
     scene, spp, _, views, _, _, budget = _adaptive_views(scene, max_spp, initial_spp, seed, symmetry)
     if not views.size:
         return {"cpu_s": 0.0, "samples": 0, "launches": 0, "views": 0, "samples_per_view": 0.0, "views_short": 0,
-                "pilot_cpu_s": 0.0}
+                "pilot_cpu_s": 0.0, "groups": []}
     renderer = _PixelRenderer(scene, variant, "spherical", 0)
     renderer.passes(views[:8], 1, passes, seed)                    # compiles the kernels: not timed
     start = time.process_time()
@@ -676,7 +691,6 @@ def forecast_render_to_error(scene, target_relative_error: float, rounds: int, m
     start = time.process_time()
     orders, standard_error = renderer.statistics(renderer.passes(views, pilot_spp // passes, passes, seed))
     pilot_cpu = time.process_time() - start
-    sample_cpu = max(pilot_cpu - launch_cpu, 0.5 * pilot_cpu) / (views.size * pilot_samples)
     with np.errstate(over="ignore", invalid="ignore"):
         variance = stopping_error(orders[:, :, 0, :], standard_error[:, 0, :], scene.wavelengths_nm,
                                   dynamic_range) ** 2 * pilot_samples
@@ -688,6 +702,19 @@ def forecast_render_to_error(scene, target_relative_error: float, rounds: int, m
         launches += len(round_plan)
         if not round_plan:
             break
-    return {"cpu_s": launch_cpu * launches + sample_cpu * samples.sum(), "samples": int(samples.sum()),
-            "launches": launches, "views": int(views.size), "samples_per_view": float(samples.mean()),
-            "views_short": int(np.sum(np.sqrt(variance / samples) > target_relative_error)), "pilot_cpu_s": pilot_cpu}
+    # each group of views (COST_GROUPS, by the samples forecast) at its own CPU per sample, timed
+    # with a quarter of the pilot's samples per view
+    timing_spp = max(pilot_spp // (4 * passes), 1)
+    groups = []
+    for number, group in enumerate(np.array_split(np.argsort(samples, kind="stable"), min(COST_GROUPS, views.size))):
+        start = time.process_time()
+        renderer.passes(views[group], timing_spp, passes, seed + 2 + number)
+        cpu = time.process_time() - start
+        pilot_cpu += cpu
+        groups.append({"views": int(group.size), "samples": int(samples[group].sum()),
+                       "us_per_sample": 1e6 * max(cpu - launch_cpu, 0.5 * cpu) / (group.size * timing_spp * passes)})
+    return {"cpu_s": launch_cpu * launches + sum(1e-6 * g["us_per_sample"] * g["samples"] for g in groups),
+            "samples": int(samples.sum()), "launches": launches, "views": int(views.size),
+            "samples_per_view": float(samples.mean()),
+            "views_short": int(np.sum(np.sqrt(variance / samples) > target_relative_error)), "pilot_cpu_s": pilot_cpu,
+            "groups": groups}

@@ -123,8 +123,9 @@ def test_the_forecast_of_an_adaptive_render_is_the_samples_it_takes(mi):
     """:func:`forecast_render_to_error` replays the adaptive rounds from a pilot: on the sky of
     the test above (delta tracking to 1.5%, 48 views), its samples per view are those the render
     takes within 30% (the error's 1/sqrt(N) law off by a power would be 2-4x off here), it does not
-    count the pilot as rounds, and with a budget too small for the target it says how many views
-    stop short of it, as the render does."""
+    count the pilot as rounds, its groups of views timed apart hold every view and sample, and
+    with a budget too small for the target it says how many views stop short of it, as the render
+    does."""
     scene = Scene(sun=Sun(zenith_deg=40.0), camera=Camera(width=8, height=6), wavelengths="rgb",
                   render=RenderSettings(passes=16, pixel_sampling="centre", estimator="delta_tracking"))
     forecast = forecast_render_to_error(scene, 0.015, rounds=8, max_spp=65536, pilot_spp=4096, seed=5,
@@ -134,6 +135,11 @@ def test_the_forecast_of_an_adaptive_render_is_the_samples_it_takes(mi):
     assert 0.7 < forecast["samples_per_view"] / sky.metadata["spp"] < 1.3, (forecast, sky.metadata["spp"])
     assert forecast["samples"] == pytest.approx(48 * forecast["samples_per_view"])
     assert forecast["cpu_s"] > 0.0 and forecast["pilot_cpu_s"] > 0.0
+    # the views timed in groups by their samples, which together are the views and the samples
+    groups = forecast["groups"]
+    assert [g["views"] for g in groups] == [12] * 4 and sum(g["samples"] for g in groups) == forecast["samples"]
+    per_view = [g["samples"] / g["views"] for g in groups]
+    assert per_view == sorted(per_view) and all(g["us_per_sample"] > 0.0 for g in groups)
     starved = forecast_render_to_error(scene, 0.015, rounds=8, max_spp=512, pilot_spp=4096, seed=5, symmetry=False)
     short = render_to_error(scene, 0.015, seeds=list(range(11, 19)), max_spp=512, symmetry=False)
     assert starved["samples_per_view"] == 512

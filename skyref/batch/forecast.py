@@ -6,8 +6,9 @@ audit's grid a clear sky with the sun at the zenith takes seconds and a hazy one
 at sunset hours, so the progress bar's estimate (the mean time of the skies finished so far)
 says little. Each sky still to do gets a pilot render of the views it traces, at a fixed sample
 count and thrown away, from which :func:`skyref.render.forecast_render_to_error` replays its
-adaptive rounds. A pilot costs what its samples cost (1024 views x 2048 samples: about 20 CPU s
-at 17 wavelengths), a small share of the sky it forecasts.
+adaptive rounds. A pilot costs what its samples cost (1024 views x 2048 samples: about 10-20
+CPU s at 17 wavelengths) and a quarter of that again to time the views' cost per sample, a small
+share of the sky it forecasts.
 """
 
 from __future__ import annotations
