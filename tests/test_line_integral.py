@@ -215,14 +215,15 @@ def test_single_scattering_quadrature_hard_cases(mi, case):
 # --- single scattering sampled at a few points, against the quadrature ------------------------------
 
 
-def _sampled_and_quadrature(mi, atmosphere, sun_zenith, segments, draws):
+def _sampled_and_quadrature(mi, atmosphere, sun_zenith, segments, draws, mixture=False):
     """For each (altitude m, view zenith deg, azimuth deg) segment from straight above the
     observer to the ground or the top: the quadrature's single scattering (``integrate``) and
     ``draws`` jittered-stratified estimates of ``sampled_sunlight`` (4 points each), per channel,
-    and the segments' lengths (m)."""
+    and the segments' lengths (m). ``mixture``: the points drawn as a path's later segments draw
+    them, by a :class:`ProxyMixture` (weights 0.3 / 0.7) instead of the grey proxy."""
     import drjit as dr
 
-    from skyref.plugins.line_integral import GreyProxy
+    from skyref.plugins.line_integral import GreyProxy, ProxyMixture
     from skyref.scene import direction_from_angles
 
     integ = line_integrator(mi, atmosphere, sun_zenith)
@@ -240,7 +241,12 @@ def _sampled_and_quadrature(mi, atmosphere, sun_zenith, segments, draws):
     grey = GreyProxy(channels, channels.zeros() + 1.0)
     length = dr.minimum(geometry.distance_to_ground(p, d, h), geometry.distance_to_top(p, d, h))
     exact, _, _ = line.integrate(channels, p, d, h, length, sun, grey, sunlight="quadrature")
-    _, _, quadrature = line.integrate(channels, p, d, h, length, sun, grey, sunlight="sampled")
+    if mixture:
+        proxy = ProxyMixture(channels, channels.zeros() + 1.0, mi.ArrayXf([mi.Float(0.3), mi.Float(0.7)]))
+        _, _, quadrature = line.integrate(channels, p, d, h, length, sun, proxy, sunlight="sampled")
+        quadrature, _, _ = proxy.mix(quadrature, geometry.distance_to_ground(p, d, h) < length + 1.0)
+    else:
+        _, _, quadrature = line.integrate(channels, p, d, h, length, sun, grey, sunlight="sampled")
     jitter = np.random.default_rng(3).uniform(0.0, 1.0, n).astype(np.float32)
     u = (mi.Float(lane % draws) + mi.Float(jitter)) / draws      # jittered: one stratum per draw
     sampled = line.sampled_sunlight(channels, quadrature, p, d, sun, u, 4)
@@ -256,19 +262,21 @@ def _sampled_and_quadrature(mi, atmosphere, sun_zenith, segments, draws):
 SLOW = pytest.mark.slow
 
 
-@pytest.mark.parametrize("sun_zenith", [60.0, 88.5])
-def test_sampled_sunlight_is_the_quadrature_on_average(mi, sun_zenith):
+@pytest.mark.parametrize("sun_zenith, mixture", [(60.0, False), (88.5, False), (88.5, True)])
+def test_sampled_sunlight_is_the_quadrature_on_average(mi, sun_zenith, mixture):
     """Clear sky, sun zenith 60 and 88.5: the points of ``sampled_sunlight`` (drawn by the
-    panels' lit masses; for the low sun, tilted by the sun's transmittance) average to the
-    quadrature's single scattering on rising, descending, horizontal and ground-bound segments
-    from 0.5-30 km. 2^16 jittered-stratified draws per segment: within 1e-4, or |z| < 4 (64
-    interleaved groups of draws as independent estimates), per segment and channel."""
+    panels' lit masses; for the low sun, one untilted and three tilted by the sun's
+    transmittance, combined by the balance heuristic; by the grey proxy, and for the low sun by
+    a proxy mixture as well) average to the quadrature's single scattering on rising,
+    descending, horizontal and ground-bound segments from 0.5-30 km. 2^16 jittered-stratified
+    draws per segment: within 1e-4, or |z| < 4 (64 interleaved groups of draws as independent
+    estimates), per segment and channel."""
     import skyref.atmosphere as atm
 
     segments = [(500.0, 0.0, 0.0), (2000.0, 80.0, 180.0), (8000.0, 90.0, 0.0), (30_000.0, 95.0, 180.0),
                 (1000.0, 120.0, 90.0), (15_000.0, 60.0, 0.0), (5000.0, 91.0, 0.0), (20_000.0, 100.0, 180.0)]
     draws = 1 << 16
-    exact, sampled, _ = _sampled_and_quadrature(mi, atm.bruneton2017(), sun_zenith, segments, draws)
+    exact, sampled, _ = _sampled_and_quadrature(mi, atm.bruneton2017(), sun_zenith, segments, draws, mixture)
     groups = sampled.reshape(len(segments), draws // 64, 64, len(WL)).mean(axis=1)
     mean, se = groups.mean(axis=1), groups.std(axis=1, ddof=1) / 8.0
     relative = mean / exact - 1.0

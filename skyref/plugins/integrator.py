@@ -183,7 +183,8 @@ IMPORTANCE_ROULETTE_WINDOW = 0.3
 
 #: Points per segment at which a line-integral path's segments after the camera's sample their
 #: scattered sunlight (:meth:`LineIntegral.sampled_sunlight`). Clear sky, sun zenith 60 deg, RGB,
-#: against 1 point: order-2 noise 0.48% -> 0.36% at 9% more time.
+#: against 1 point: order-2 noise 0.48% -> 0.36% at 9% more time. Where they are drawn with the
+#: sun's transmittance (``SUNLIT_SAMPLING_ZENITH_DEG``) one more is drawn without it.
 SAMPLED_SUNLIGHT_POINTS = 4
 
 #: Sun zenith (deg, at the observer) beyond which those points are drawn with the sun's
