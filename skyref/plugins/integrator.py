@@ -5,7 +5,7 @@ for the planet: the ground and the top of the atmosphere are analytic spheres, o
 observer-centred frame, see :mod:`skyref.plugins.geometry`).
 
 Two independent estimators (``estimator``): ``line_integral``, the default
-(:mod:`skyref.plugins.line_integral`; 9-74x less CPU to a given error, but kernels that compile
+(:mod:`skyref.plugins.line_integral`; 9-60x less CPU to a given error, but kernels that compile
 for 15 s to minutes per new configuration), and ``delta_tracking``, the baseline described
 below, which the tests compare it against. The line integral computes single scattering by
 quadrature along the camera ray, the sun's optical depth from a table, and forced collisions,
