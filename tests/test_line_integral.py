@@ -215,19 +215,28 @@ def test_single_scattering_quadrature_hard_cases(mi, case):
 # --- single scattering sampled at a few points, against the quadrature ------------------------------
 
 
-def _sampled_and_quadrature(mi, atmosphere, sun_zenith, segments, draws, mixture=False):
+def _sampled_and_quadrature(mi, atmosphere, sun_zenith, segments, draws, mixture=False, tilt_scale=None):
     """For each (altitude m, view zenith deg, azimuth deg) segment from straight above the
     observer to the ground or the top: the quadrature's single scattering (``integrate``) and
     ``draws`` jittered-stratified estimates of ``sampled_sunlight`` (4 points each), per channel,
     and the segments' lengths (m). ``mixture``: the points drawn as a path's later segments draw
-    them, by a :class:`ProxyMixture` (weights 0.3 / 0.7) instead of the grey proxy."""
+    them, by a :class:`ProxyMixture` (weights 0.3 / 0.7) instead of the grey proxy.
+    ``tilt_scale``: the sampled sunlight's tilt (a low sun's) drawn from the sun's optical depth
+    times this (a tilt as wrong as one likes; 0: no tilt), or None (as the integrator draws it)."""
     import drjit as dr
 
     from skyref.plugins.line_integral import GreyProxy, ProxyMixture
     from skyref.scene import direction_from_angles
 
+    from skyref.plugins.sun_optical_depth import GreySunDepth
+
     integ = line_integrator(mi, atmosphere, sun_zenith)
     line, geometry = integ.line, integ.geometry
+    if tilt_scale == 0.0:
+        line.sunlit_sampling = None
+    elif tilt_scale is not None:
+        tilt = line.sunlit_sampling
+        line.sunlit_sampling = GreySunDepth(tilt.sun_depth, [tilt_scale * k for k in tilt.coefficients])
     sun = integ.sun.direction
     n = len(segments) * draws
     lane = dr.arange(mi.UInt32, n)
@@ -285,6 +294,29 @@ def test_sampled_sunlight_is_the_quadrature_on_average(mi, sun_zenith, mixture):
     # beyond the noise only by the two rules' own difference (the points' optical depth by the
     # rule on [a, t], the nodes' by the panel's cumulative matrix)
     assert np.all((np.abs(z) < 4.0) | (np.abs(relative) < 1e-4)), (z, relative)
+
+
+def test_the_untilted_sunlight_point_bounds_a_wrong_tilt(mi):
+    """A low sun's sampled sunlight draws one point without the tilt and combines it with the
+    tilted ones by the balance heuristic, so that a point's weight is bounded by the untilted
+    density's (at most K times an untilted point's share): with the tilt far too steep (the sun's optical depth x 10: as if its transmittance
+    fell 10x faster towards the planet's shadow than it does), hazy segments at sun zenith 88.5
+    that rise, graze and descend into the shadow keep the quadrature's value on average, and
+    their largest draw of 2^16 stays within 10x that of the untilted estimate (4 points, no
+    tilt; measured 1.0-3.6x). Without the untilted point (checked by hand) they were 8-20,000x
+    the untilted ones, and the mean of the 2^16 draws 51% low on the rising segment."""
+    import skyref.atmosphere as atm
+
+    segments = [(500.0, 80.0, 180.0), (2000.0, 89.0, 180.0), (5000.0, 91.0, 0.0), (20_000.0, 100.0, 180.0)]
+    draws = 1 << 16
+    hazy = atm.from_turbidity(6.0)
+    exact, wrong, _ = _sampled_and_quadrature(mi, hazy, 88.5, segments, draws, tilt_scale=10.0)
+    _, untilted, _ = _sampled_and_quadrature(mi, hazy, 88.5, segments, draws, tilt_scale=0.0)
+    groups = wrong.reshape(len(segments), draws // 64, 64, len(WL)).mean(axis=1)
+    mean, se = groups.mean(axis=1), groups.std(axis=1, ddof=1) / 8.0
+    print("relative", mean / exact - 1.0, "largest draw / untilted's", wrong.max(axis=1) / untilted.max(axis=1))
+    assert np.all((np.abs((mean - exact) / se) < 4.0) | (np.abs(mean / exact - 1.0) < 1e-4)), (mean / exact - 1.0)
+    assert np.all(wrong.max(axis=1) <= 10.0 * untilted.max(axis=1)), wrong.max(axis=1) / untilted.max(axis=1)
 
 
 def single_scattering_reference(atmosphere, sun_direction, altitude_m, direction, length_m):
