@@ -537,11 +537,11 @@ class LineIntegral:
                 lit_maps.append(grey.panel_map(depth, tilt))
             prefix = [q + r for q, r in zip(prefix, depth)]
         transmittance = dr.exp(-channels.optical_depth(prefix))
-        untilted = None if sunlight is None else [dr.select(on, m, 0.0) for on, m in zip(lit, masses)]
-        if tilted:
-            lit_masses = [dr.select(on, m, 0.0) for on, m in zip(lit, lit_masses)]
-        else:
-            lit_masses, untilted = untilted, None
+        def on_lit_panels(panel_masses):
+            return [dr.select(on, m, 0.0) for on, m in zip(lit, panel_masses)]
+
+        untilted = on_lit_panels(masses) if tilted else None
+        lit_masses = None if sunlight is None else on_lit_panels(lit_masses if tilted else masses)
         light = mi.ArrayXf([mi.Float(0.0) for _ in range((2 if self.polarized else 1) * channels.count)])
         return light, transmittance, SegmentQuadrature(panels, maps, prefixes, prefix, masses, lit_masses,
                                                        lit_maps=lit_maps if tilted else None,
@@ -689,14 +689,14 @@ class LineIntegral:
         # each constituent's phase function at the segment's one scattering angle
         phases = None if self.polarized else self.optics.component_phases(cos_scatter)
         light = mi.ArrayXf([mi.Float(0.0) for _ in range((2 if self.polarized else 1) * channels.count)])
-        # (technique, its number of points, the other technique and its number) per point
+        # per point: (technique, its number of points, the other technique and its number, the
+        # point's offset in the technique's stratification)
+        plan = [("lit", points, None, 0, k / points) for k in range(points)]
         if quadrature.tilted:
-            plan = [("untilted", 1, "lit", points)] + [("lit", points, "untilted", 1)] * points
-        else:
-            plan = [("lit", points, None, 0)] * points
-        for k, (technique, count, other, other_count) in enumerate(plan):
-            stratum, strata = (0, 1) if technique == "untilted" else (k - (len(plan) - count), count)
-            u_k = u + stratum / strata
+            plan = [("untilted", 1, "lit", points, 0.0)] + [("lit", points, "untilted", 1, offset)
+                                                           for *_, offset in plan]
+        for technique, count, other, other_count, offset in plan:
+            u_k = u + offset
             u_k = dr.minimum(dr.select(u_k >= 1.0, u_k - 1.0, u_k), 1.0 - 2.0 ** -24)
             x, hx, tau, pdf, _, other_pdf = self._draw_point(quadrature, p, d, u_k, technique, other)
             denominator = count * pdf if other is None else count * pdf + other_count * other_pdf
