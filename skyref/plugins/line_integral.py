@@ -272,6 +272,18 @@ def _select_map(chosen, new, old):
     return new.select(chosen, old)
 
 
+def _proxy_shares(by_proxy, mass):
+    """Each proxy's share of a panel's mixed mass, w_k m_k / sum_j w_j m_j (``by_proxy``: the
+    w_k m_k, ``mass``: their sum)."""
+    return by_proxy * dr.rcp(dr.maximum(mass, 1e-30))
+
+
+def _joint_density(shares, maps, g):
+    """Each proxy's share of a panel times its map's density at the panel's relative position
+    ``g``, share_k density_k(g): their sum is the mixture's in-panel density."""
+    return shares * mi.ArrayXf([m.density(g) for m in maps])
+
+
 class SegmentQuadrature:
     """The quadrature of one segment: its panels [a_i, b_i] and their changes of variable
     (:class:`PanelMap`), the optical depth per constituent at each panel's start
@@ -629,13 +641,13 @@ class LineIntegral:
         else:
             # the proxy k that draws the point within the panel, with probability its share of the
             # panel's mass, w_k m_k / sum_j w_j m_j
-            shares = own * dr.rcp(dr.maximum(mass, 1e-30))
+            shares = _proxy_shares(own, mass)
             first = shares[0]
             by_first = v < first
             g = dr.select(by_first, panel_map[0](dr.minimum(v * dr.rcp(dr.maximum(first, 1e-30)), 1.0 - 2.0 ** -24))[0],
                           panel_map[1](dr.clip((v - first) * dr.rcp(dr.maximum(1.0 - first, 1e-30)), 0.0,
                                                1.0 - 2.0 ** -24))[0])
-            joint = shares * mi.ArrayXf([m.density(g) for m in panel_map])
+            joint = _joint_density(shares, panel_map, g)
             in_panel = dr.sum(joint, axis=0)
         step = g * width
         t = a + step
@@ -648,8 +660,8 @@ class LineIntegral:
             if other_by_proxy is None:
                 other_in_panel = other_map.density(g)
             else:
-                other_in_panel = dr.sum(other_own * dr.rcp(dr.maximum(other_mass, 1e-30))
-                                        * mi.ArrayXf([m.density(g) for m in other_map]), axis=0)
+                other_in_panel = dr.sum(_joint_density(_proxy_shares(other_own, other_mass), other_map, g),
+                                        axis=0)
             other_total = sum(other_masses, mi.Float(0.0))
             other_pdf = other_mass * other_in_panel * dr.rcp(dr.maximum(other_total * width, 1e-30))
         return x, hx, tau, pdf, joint, other_pdf
