@@ -275,7 +275,8 @@ def grid_tables(grid, rows_by_method):
              "Median over the skies of each atmosphere (worst sky in parentheses); luminance errors in %, "
              "RMS noise-corrected; CIEDE2000 absolute. Regions: sky = every view that misses the ground; "
              "horizon = 5 deg above it; sun = within 10 deg of the sun (disk excluded); anti-solar = within 30 "
-             "deg of the anti-sun; ground = views that hit it.", "",
+             "deg of the anti-sun; ground = views that hit it; `–`: none of the skies has the region (a black ground, "
+             "an anti-sun below the horizon).", "",
              "| method | atmosphere | precompute (s) | per view (ms) | lookup (ns/dir) | sky RMS | sky p95 | horizon RMS "
              "| sun RMS | anti-solar RMS | ground RMS | CIEDE2000 p95 |",
              "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
@@ -289,7 +290,10 @@ def grid_tables(grid, rows_by_method):
                 label += f" ({len(sub)} of {per_atmosphere} skies)"
 
             def fmt(region, stat="rms", metric="luminance", scale=100.0):
-                return f"{scale * _median(sub, region, metric, stat):.1f} ({scale * _worst(sub, region, metric, stat):.0f})"
+                median = _median(sub, region, metric, stat)
+                if not np.isfinite(median):
+                    return "–"
+                return f"{scale * median:.1f} ({scale * _worst(sub, region, metric, stat):.0f})"
 
             lines.append(f"| {name} | {label} | {sub[0]['precompute_s']:.1f} | "
                          f"{1e3 * np.median([r['per_view_s'] for r in sub]):.0f} | {np.median([r['lookup_ns'] for r in sub]):.0f} "
