@@ -14,9 +14,11 @@ random (a fixed seed per sky). Each is rendered in two stages: a pilot of ``PILO
 thrown away, whose spread sets the sample count at which the check's standard error is half the
 truth's (at most ``MAX_SPP``); then that many samples, which alone make the check's estimate (its
 count does not depend on them: no stopping bias). Per view and wavelength z = (truth - check) /
-combined standard error: the mean z of an unbiased truth is 0 within about 1/sqrt(count), its
-mean z^2 about 1 (more where the truth's own error bars are too small), and a truth biased low
-has mean z < 0 in its dark views.
+combined standard error: the mean z of an unbiased truth is 0 within about 1/sqrt(count), and a
+truth biased low has mean z < 0 in its dark views. Both error bars are estimated, each from the
+spread of 16 passes (:func:`honest_z`): honest ones give z a distribution with heavier tails
+than a normal, mean z^2 about 1.1 and |z| > 5 about once in 20,000 values, and a mean z^2
+above that means error bars too small.
 
 Usage: ``python benchmarks/truth_check.py [--grid grids/lut_audit.toml] [--skies 0-5,21]
 [--views 8]`` (default: every finished sky of the grid not checked yet); writes ``results/truth_check.md`` and
@@ -111,6 +113,21 @@ def check_sky(grid, index: int, views_per_kind: int, variant=None) -> dict:
             "check_relative_error_median": float(np.median(error / radiance))}
 
 
+def honest_z(passes: int, error_share: float = ERROR_SHARE, draws: int = 1 << 20) -> dict:
+    """What z looks like when both error bars are honest: the truth's and the check's estimates
+    each the mean of ``passes`` independent normal pass values, the check's true standard error
+    ``error_share`` x the truth's, each error bar the spread of its passes / sqrt(passes) (a
+    view's truth from one launch; pooled over rounds it has more passes and z is closer to a
+    normal). Simulated with a fixed seed: mean z^2 and the share of |z| above 3, 4 and 5."""
+    rng = np.random.default_rng(0)
+    truth = rng.standard_normal((draws, passes))
+    check = error_share * rng.standard_normal((draws, passes))
+    z = (truth.mean(axis=1) - check.mean(axis=1)) / np.sqrt(
+        (truth.var(axis=1, ddof=1) + check.var(axis=1, ddof=1)) / passes)
+    return {"passes": passes, "mean_z2": float(np.mean(z ** 2)),
+            **{f"share_above_{k}": float(np.mean(np.abs(z) > k)) for k in (3, 4, 5)}}
+
+
 def truth_sha256(store, sky_id: str) -> str:
     """The SHA-256 of a finished sky's EXR, from its marker."""
     with open(store.marker_path(sky_id)) as f:
@@ -123,7 +140,7 @@ def label(coordinates: dict) -> str:
     return (f"{name}, {coordinates['observer.altitude_m'] / 1000:g} km, sun {coordinates['sun.zenith_deg']:g}")
 
 
-def markdown(grid_path: str, rows: list, views_per_kind: int, wavelengths: int) -> str:
+def markdown(grid_path: str, rows: list, views_per_kind: int, wavelengths: int, honest: dict) -> str:
     values = len(rows) * 2 * views_per_kind * wavelengths
     all_z2 = np.mean([r["mean_z2"] for r in rows]) if rows else math.nan
     lines = ["# The ground truth against fixed-count renders of its views", "",
@@ -135,8 +152,12 @@ def markdown(grid_path: str, rows: list, views_per_kind: int, wavelengths: int) 
              f"error is {ERROR_SHARE:g} x the truth's (at most {MAX_SPP:,}); that count's samples alone are the "
              "check. z = (truth - check) / combined standard error, per view and wavelength "
              f"({len(rows)} skies, {values:,} values; mean z^2 over them {all_z2:.2f}). A truth biased low by "
-             "stopping on a heavy tail (docs/design.md) has mean z < 0 in its dark views; honest error bars give "
-             "mean z^2 about 1.", "",
+             "stopping on a heavy tail (docs/design.md) has mean z < 0 in its dark views. Each error bar is "
+             f"the spread of {honest['passes']} passes, itself an estimate: honest ones give mean z^2 "
+             f"{honest['mean_z2']:.2f} (not 1) and |z| above 4 in {100 * honest['share_above_4']:.3f}% of values, "
+             f"above 5 in {100 * honest['share_above_5']:.4f}% (here {values * honest['share_above_4']:.0f} and "
+             f"{values * honest['share_above_5']:.1f} values, fewer independent ones: a view's wavelengths share "
+             "their paths), simulated with normal pass means.", "",
              "| sky | checked | check CPU (s) | check spp (median) | mean z | mean z^2 | max abs z | dark views: mean z | "
              "dark: mean z^2 | dark: truth / check - 1 (median) |",
              "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
@@ -202,8 +223,9 @@ def main():
               f"dark mean z {r['dark_mean_z']:+.2f}, {r['cpu_s']:.0f} CPU s", flush=True)
     wavelengths = len(grid.validate().wavelengths_nm)
     rows = [rows[sky] for sky in sorted(rows)]
-    report = dict(settings, skies=rows)
-    print(write_results("truth_check", report, markdown(grid_path, rows, args.views, wavelengths)))
+    honest = honest_z(grid.output.passes)
+    report = dict(settings, honest_z=honest, skies=rows)
+    print(write_results("truth_check", report, markdown(grid_path, rows, args.views, wavelengths, honest)))
 
 
 if __name__ == "__main__":
