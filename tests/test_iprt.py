@@ -34,7 +34,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from scipy.stats import binom, t
+from scipy.stats import binom
+from scipy.stats import t as student_t
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # `tests.references` under plain pytest
 
@@ -62,7 +63,7 @@ def _components(setting) -> int:
 def max_z(z_scores: int, false_alarm: float) -> float:
     """The |z| that one of ``z_scores`` exact z-scores (Student's t) exceeds with probability
     ``false_alarm``."""
-    return float(t.isf(false_alarm / (2 * z_scores), DEGREES_OF_FREEDOM))
+    return float(student_t.isf(false_alarm / (2 * z_scores), DEGREES_OF_FREEDOM))
 
 
 MAX_Z_CI = max_z(sum(len(_ci_rows(s.rows)) * _components(s) for s in SETTINGS), 0.06)
@@ -73,7 +74,7 @@ def allowed_beyond_3(compared: int) -> int:
     """How many of ``compared`` z-scores may exceed 3 in magnitude: 1% of them (the issue's
     "99% within 3"), or the 99.9th percentile of the count for exact codes (binomial, p the
     share of Student's t beyond 3), whichever is larger."""
-    return max(int(0.01 * compared), int(binom.ppf(0.999, compared, 2.0 * t.sf(3.0, DEGREES_OF_FREEDOM))))
+    return max(int(0.01 * compared), int(binom.ppf(0.999, compared, 2.0 * student_t.sf(3.0, DEGREES_OF_FREEDOM))))
 
 
 def _check(setting, rows, target, max_z, estimator="line_integral"):
