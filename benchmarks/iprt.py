@@ -89,8 +89,9 @@ def compare(setting, records: dict) -> dict:
     if not numbers:
         return out
     rows = setting.rows[numbers]
-    mean = np.array([records[str(n)]["mean"] for n in numbers])
-    se = np.array([records[str(n)]["se"] for n in numbers])
+    kept = [records[str(n)] for n in numbers]
+    mean = np.array([k["mean"] for k in kept])
+    se = np.array([k["se"] for k in kept])
     z = iprt.z_scores(mean, se, rows)
     lit = rows[:, 6] > 0.0
     rel = mean[lit, 0] / rows[lit, 6] - 1.0
@@ -99,9 +100,9 @@ def compare(setting, records: dict) -> dict:
             "share_abs_z_above_3": float(np.mean(np.abs(z[lit]) > 3.0)),
             "mean_z_I": float(z[lit, 0].mean()), "rms_rel_diff_I": float(np.sqrt(np.mean(rel ** 2))),
             "median_rel_se_I": float(np.median(se[lit, 0] / mean[lit, 0])),
-            "samples_per_direction": float(np.mean([records[str(n)]["samples"] for n in numbers])),
-            "cpu_seconds": float(sum(records[str(n)]["cpu_seconds"] for n in numbers)),
-            "dates": sorted({records[str(n)]["date"] for n in numbers})}
+            "samples_per_direction": float(np.mean([k["samples"] for k in kept])),
+            "cpu_seconds": float(sum(k["cpu_seconds"] for k in kept)),
+            "dates": sorted({k["date"] for k in kept})}
 
 
 def scalar_error_a1(target, estimator):
@@ -172,7 +173,8 @@ def main():
     parser.add_argument("--estimator", default=DEFAULT_ESTIMATOR, choices=ESTIMATORS,
                         help="skyref's estimator (default: the ground truth's, the line integral)")
     args = parser.parse_args()
-    unknown = sorted(set(args.cases.split(",")) - set(iprt.CASES))
+    cases = args.cases.split(",")
+    unknown = sorted(set(cases) - set(iprt.CASES))
     if unknown:
         parser.error(f"--cases: {', '.join(unknown)} not among {', '.join(iprt.CASES)}")
     if args.stride < 1:
@@ -183,7 +185,6 @@ def main():
         parser.error(f"--target: {args.target} is not in (0, 1)")
     path = directions_path(args.estimator, args.target)
     kept = load_directions(path)
-    cases = args.cases.split(",")
     for case in cases:
         for setting in iprt.settings(case):
             numbers = np.arange(args.offset, len(setting.rows), args.stride)

@@ -12,7 +12,7 @@ within ``max_z``. skyref's standard errors are themselves estimates (63 degrees 
 dominate the combined error (MYSTIC's is 0.01-0.04% of I), so the z-scores of exact codes follow
 Student's t, whose tails are heavier than a normal's: over the 55,000 z-scores of every
 direction a bound of 5 would be exceeded in one run of four (a normal's: one in 30). The bounds
-are those an exact z-score exceeds with a set probability (:func:`max_z`): 6% on the CI subset
+are those an exact z-score exceeds with a set probability (:func:`z_bound`): 6% on the CI subset
 (~900 z-scores: 4.27), 1% on every direction (5.86). A 1% bias in I is 5 standard errors on the
 CI subset, 10 on every direction.
 
@@ -60,14 +60,14 @@ def _components(setting) -> int:
     return 4 if setting.case == "a3" else 3
 
 
-def max_z(z_scores: int, false_alarm: float) -> float:
+def z_bound(z_scores: int, false_alarm: float) -> float:
     """The |z| that one of ``z_scores`` exact z-scores (Student's t) exceeds with probability
     ``false_alarm``."""
     return float(student_t.isf(false_alarm / (2 * z_scores), DEGREES_OF_FREEDOM))
 
 
-MAX_Z_CI = max_z(sum(len(_ci_rows(s.rows)) * _components(s) for s in SETTINGS), 0.06)
-MAX_Z_EVERY_DIRECTION = max_z(sum(len(s.rows) * _components(s) for s in SETTINGS), 0.01)
+MAX_Z_CI = z_bound(sum(len(_ci_rows(s.rows)) * _components(s) for s in SETTINGS), 0.06)
+MAX_Z_EVERY_DIRECTION = z_bound(sum(len(s.rows) * _components(s) for s in SETTINGS), 0.01)
 
 
 def allowed_beyond_3(compared: int) -> int:
