@@ -514,7 +514,9 @@ def write_report(grid):
              "directions (64x32 over the sphere) as the path tracer; the solar disk is excluded from both. "
              "Method notes: each method's module docstring (skyref/lut/*.py) states what its paper leaves open "
              "and what was chosen. Per view: the tables a frame rebuilds when the observer or sun moves "
-             "(Hillaire's sky view, Elek's aerial-perspective volume).", "",
+             "(Hillaire's sky view, Elek's aerial-perspective volume). How far the truth's own error bars hold: "
+             "[truth_check.md](truth_check.md) (16 views of every sky rendered again at a count their own samples "
+             "do not set).", "",
              *grid_tables(grid, rows_by_method), "![error vs sun zenith](lut_audit/error_vs_sun.png)", "",
              *polarized_table(grid, rows_by_method, _load("polarized"))]
     if points:
